@@ -1,0 +1,61 @@
+"""Parallel collection: worker processes, one simulator (and GL context) each.
+
+Episodes come back in index order whatever the number of workers, and each is
+a pure function of ``(seed, index)`` (see :mod:`.rollout`), so a collection
+gives identical episodes for any worker count.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import sys
+from collections.abc import Iterable, Iterator
+
+from .env import EnvConfig
+from .rollout import Episode, PolicyFactory, make_envs, run_episodes
+
+_WORKER: dict = {}
+
+
+def _init_worker(config: EnvConfig, make_policy: PolicyFactory, batch: int, seed: int) -> None:
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    policy = make_policy()
+    torch = sys.modules.get("torch")  # a learned policy brings torch; keep it to one thread per worker
+    if torch is not None:
+        torch.set_num_threads(1)
+    _WORKER.update(envs=make_envs(config, batch), policy=policy, seed=seed)
+
+
+def _run_chunk(indices: list[int]) -> list[Episode]:
+    return list(run_episodes(_WORKER["envs"], _WORKER["policy"], indices, _WORKER["seed"]))
+
+
+def collect_episodes(config: EnvConfig, make_policy: PolicyFactory, indices: Iterable[int], seed: int,
+                     workers: int = 1, batch: int = 1) -> Iterator[Episode]:
+    """Yield episodes ``indices`` in order, run by ``workers`` processes.
+
+    ``make_policy`` is called once in each worker (it must be picklable, e.g. a
+    ``functools.partial``); ``batch`` environments per worker step in lock-step
+    so a learned policy evaluates them in one forward pass.
+    """
+    indices = list(indices)
+    if workers < 1:
+        from nsl.errors import ConfigError
+
+        raise ConfigError(f"workers {workers} must be at least 1")
+    chunks = [indices[k:k + batch] for k in range(0, len(indices), batch)]
+    if workers == 1:
+        _init_worker(config, make_policy, batch, seed)
+        try:
+            for chunk in chunks:
+                yield from _run_chunk(chunk)
+        finally:
+            for env in _WORKER.pop("envs", []):
+                env.close()
+            _WORKER.clear()
+        return
+    ctx = mp.get_context("spawn")
+    with ctx.Pool(workers, initializer=_init_worker, initargs=(config, make_policy, batch, seed)) as pool:
+        for episodes in pool.imap(_run_chunk, chunks):
+            yield from episodes

@@ -1,0 +1,177 @@
+"""The bin-grasping scene, built with ``mujoco.MjSpec``.
+
+A table with a 30 cm bin, 1-5 procedural objects, and a parallel-jaw gripper
+on a visible wrist and arm link.  The gripper is driven in Cartesian space by
+position actuators on three slides (x, y, z of the wrist) and a hinge (yaw);
+two slide fingers close along the gripper's local x axis.  A fixed
+over-the-shoulder camera sees the gripper and the whole bin.
+
+Everything a shift or the environment reads later is named.  Grasp physics
+follow what made grasps reliable in the prototype measured on this machine:
+elliptic friction cones with ``impratio=10``, gravity-compensated gripper,
+stiff position control, objects normalised to graspable sizes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from .objects import load_mesh
+from .shifts import ShiftSpec
+
+# Geometry (metres).  The table top is z = 0.
+BIN_HALF = 0.15  # inner half-width of the bin
+BIN_WALL_H = 0.06
+BIN_WALL_T = 0.01
+FINGER_HALF = (0.006, 0.014, 0.03)  # finger box half sizes: thickness, width, length
+PALM_Z = -0.035  # palm centre below the wrist
+FINGER_TOP = -0.045  # where fingers attach, below the wrist
+FINGER_OPEN = 0.05  # each finger's distance from centre when open (10 cm opening)
+WRIST_Z_RANGE = (0.095, 0.34)  # wrist height limits
+START_Z = 0.25  # wrist height at the start of an episode
+WORKSPACE_HALF = 0.13  # wrist x/y limits
+TIMESTEP = 0.002
+CAMERA_NAME = "shoulder"
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    """One object of an episode: which mesh, how large, what colour, where."""
+
+    mesh_id: int
+    scale: tuple[float, float, float]  # per-axis mesh scale
+    rgba: tuple[float, float, float, float]
+    pos: tuple[float, float, float]
+    quat: tuple[float, float, float, float]
+
+
+def finger_tip_offset() -> float:
+    """Distance from the wrist down to the finger tips (base gripper)."""
+    return -(FINGER_TOP - 2 * FINGER_HALF[2])
+
+
+def _look_at_quat(pos: np.ndarray, target: np.ndarray) -> list[float]:
+    """Camera quaternion looking from pos to target with world z up."""
+    fwd = target - pos
+    fwd /= np.linalg.norm(fwd)
+    right = np.cross(fwd, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+    mat = np.stack([right, up, -fwd], axis=1)  # camera looks along -z
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, mat.flatten())
+    return quat.tolist()
+
+
+def build_spec(objects: list[ObjectSpec], shift: ShiftSpec, image_size: int = 64) -> mujoco.MjSpec:
+    """The scene for one episode, with its shift applied (not yet compiled)."""
+    spec = mujoco.MjSpec()
+    spec.modelname = "nsl_bin_grasp"
+    spec.compiler.degree = False  # all angles in this file are radians
+    opt = spec.option
+    opt.timestep = TIMESTEP
+    opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    opt.impratio = 10.0
+    opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.visual.global_.offwidth = max(image_size, 64)
+    spec.visual.global_.offheight = max(image_size, 64)
+    spec.visual.quality.shadowsize = 0
+    spec.visual.quality.offsamples = 0  # no MSAA: 64x64 frames gain nothing from it
+    spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
+    spec.visual.headlight.diffuse = [0.45, 0.45, 0.45]
+    spec.visual.headlight.specular = [0.05, 0.05, 0.05]
+
+    world = spec.worldbody
+    ceiling = world.add_light(name="ceiling", pos=[0.1, -0.2, 1.0], dir=[-0.1, 0.2, -1.0])
+    ceiling.type = mujoco.mjtLightType.mjLIGHT_DIRECTIONAL
+    ceiling.diffuse = [0.5, 0.5, 0.5]
+    ceiling.castshadow = False
+
+    box, plane = mujoco.mjtGeom.mjGEOM_BOX, mujoco.mjtGeom.mjGEOM_PLANE
+    world.add_geom(name="table", type=box, size=[0.5, 0.5, 0.02], pos=[0, 0, -0.02], rgba=[0.55, 0.42, 0.3, 1])
+    spec.add_material(name="bin_floor", rgba=[0.42, 0.44, 0.47, 1])
+    world.add_geom(name="bin_floor", type=plane, size=[BIN_HALF, BIN_HALF, 0.01], pos=[0, 0, 0.0005],
+                   material="bin_floor", contype=0, conaffinity=0)
+    wall = [0.62, 0.64, 0.68, 1]
+    for i, (x, y, hx, hy) in enumerate([
+        (BIN_HALF + BIN_WALL_T, 0, BIN_WALL_T, BIN_HALF + 2 * BIN_WALL_T),
+        (-BIN_HALF - BIN_WALL_T, 0, BIN_WALL_T, BIN_HALF + 2 * BIN_WALL_T),
+        (0, BIN_HALF + BIN_WALL_T, BIN_HALF, BIN_WALL_T),
+        (0, -BIN_HALF - BIN_WALL_T, BIN_HALF, BIN_WALL_T),
+    ]):
+        world.add_geom(name=f"bin_wall{i}", type=box, size=[hx, hy, BIN_WALL_H / 2],
+                       pos=[x, y, BIN_WALL_H / 2], rgba=wall)
+
+    cam_pos = np.array([0.0, -0.40, 0.50])
+    world.add_camera(name=CAMERA_NAME, pos=cam_pos.tolist(), quat=_look_at_quat(cam_pos, np.array([0.0, 0.05, 0.06])),
+                     fovy=52.0)
+
+    _add_gripper(spec)
+    for i, obj in enumerate(objects):
+        _add_object(spec, i, obj)
+    shift.apply(spec)
+    return spec
+
+
+def _add_gripper(spec: mujoco.MjSpec) -> None:
+    slide, hinge = mujoco.mjtJoint.mjJNT_SLIDE, mujoco.mjtJoint.mjJNT_HINGE
+    box, cyl, cap = mujoco.mjtGeom.mjGEOM_BOX, mujoco.mjtGeom.mjGEOM_CYLINDER, mujoco.mjtGeom.mjGEOM_CAPSULE
+    metal, dark = [0.75, 0.75, 0.78, 1], [0.15, 0.15, 0.17, 1]
+
+    wrist = spec.worldbody.add_body(name="wrist", pos=[0, 0, 0], gravcomp=1.0)
+    for axis_name, axis, rng in (("x", [1, 0, 0], WORKSPACE_HALF), ("y", [0, 1, 0], WORKSPACE_HALF)):
+        wrist.add_joint(name=f"wrist_{axis_name}", type=slide, axis=axis, range=[-rng, rng], limited=True,
+                        armature=0.01, damping=5.0)
+    wrist.add_joint(name="wrist_z", type=slide, axis=[0, 0, 1], range=list(WRIST_Z_RANGE), limited=True,
+                    armature=0.01, damping=5.0)
+    # The visible wrist and the arm link reaching back to the robot; visual only.
+    wrist.add_geom(name="wrist_geom", type=cyl, size=[0.022, 0.015, 0], pos=[0, 0, 0.0], rgba=dark,
+                   contype=0, conaffinity=0, mass=0.4)
+    wrist.add_geom(name="arm_link", type=cap, fromto=[0, 0, 0.015, 0.16, 0.22, 0.40], size=[0.022, 0, 0],
+                   rgba=[0.9, 0.55, 0.1, 1], contype=0, conaffinity=0, mass=0.01)
+
+    hand = wrist.add_body(name="hand", pos=[0, 0, 0], gravcomp=1.0)
+    hand.add_joint(name="wrist_yaw", type=hinge, axis=[0, 0, 1], range=[-math.pi, math.pi], limited=True,
+                   armature=0.005, damping=0.5)
+    hand.add_geom(name="flange", type=cyl, size=[0.018, 0.008, 0], pos=[0, 0, -0.022], rgba=metal, mass=0.1,
+                  contype=0, conaffinity=0)
+    # The bracket joins the flange to the finger mount; the offset shift lengthens it.
+    hand.add_geom(name="offset_bracket", type=box, size=[0.008, 1e-4, 0.006], pos=[0, 1e-4, -0.012], rgba=metal,
+                  contype=0, conaffinity=0, mass=0.01)
+    mount = hand.add_body(name="finger_mount", pos=[0, 0, 0], gravcomp=1.0)
+    mount.add_geom(name="palm", type=box, size=[FINGER_OPEN + 0.012, 0.016, 0.008], pos=[0, 0, PALM_Z],
+                   rgba=metal, mass=0.15)
+    fh = FINGER_HALF
+    for side, sign in (("left", -1.0), ("right", 1.0)):
+        f = mount.add_body(name=f"finger_{side}_body", pos=[0, 0, 0], gravcomp=1.0)
+        f.add_joint(name=f"finger_{side}", type=slide, axis=[sign, 0, 0], range=[0.0, FINGER_OPEN], limited=True,
+                    armature=0.001, damping=2.0)
+        f.add_geom(name=f"finger_{side}", type=box, size=list(fh), pos=[0, 0, FINGER_TOP - fh[2]], rgba=dark,
+                   friction=[1.5, 0.02, 0.001], condim=4, solref=[0.02, 1.0], mass=0.03, priority=1)
+
+    def position(name: str, joint: str, kp: float, force: float) -> None:
+        act = spec.add_actuator(name=name, target=joint, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        act.set_to_position(kp=kp, dampratio=1.0)
+        act.forcelimited = True
+        act.forcerange = [-force, force]
+
+    position("act_x", "wrist_x", 3000.0, 200.0)
+    position("act_y", "wrist_y", 3000.0, 200.0)
+    position("act_z", "wrist_z", 3000.0, 200.0)
+    position("act_yaw", "wrist_yaw", 50.0, 20.0)
+    for side in ("left", "right"):
+        position(f"act_finger_{side}", f"finger_{side}", 400.0, 12.0)
+
+
+def _add_object(spec: mujoco.MjSpec, i: int, obj: ObjectSpec) -> None:
+    mesh = load_mesh(obj.mesh_id)
+    spec.add_mesh(name=f"mesh{i}", uservert=(mesh.vertices * obj.scale).flatten().tolist(),
+                  userface=mesh.faces.flatten().tolist())
+    body = spec.worldbody.add_body(name=f"object{i}", pos=list(obj.pos), quat=list(obj.quat))
+    body.add_freejoint(name=f"object{i}_joint")
+    body.add_geom(name=f"object{i}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"mesh{i}", rgba=list(obj.rgba),
+                  mass=0.08, friction=[1.0, 0.01, 0.001], condim=4)

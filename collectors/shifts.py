@@ -1,0 +1,246 @@
+"""The shift suite: named, parameterised edits of the grasping scene.
+
+Each shift mirrors one challenge task of the Never Stop Learning study
+(Table 5.1).  A shift is a small frozen config with a ``severity`` (1.0 is the
+study's default; 0 is no change) from which its physical parameters follow,
+and one function that edits an ``mujoco.MjSpec`` in place.  Shifts compose:
+a :class:`ShiftSpec` is an ordered list of them, written on the command line
+as ``harsh_lighting+checkerboard_backing@0.5``.
+
+A ShiftSpec serialises to JSON with a version so datasets and checkpoints
+record exactly what produced them.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from nsl.errors import ConfigError, IncompatibleVersionError, unknown
+
+SHIFT_SPEC_VERSION = 1
+BASE = "base"
+
+
+@dataclass(frozen=True)
+class ShiftDef:
+    """A registered shift: its severity range, parameters and scene edit."""
+
+    name: str
+    kind: str  # what changes, as in Table 5.1
+    max_severity: float
+    params: Callable[[float], dict[str, float]]  # severity -> physical parameters
+    apply: Callable[[mujoco.MjSpec, dict[str, float]], None]
+    doc: str
+
+
+def _harsh_lighting_params(s: float) -> dict[str, float]:
+    return {"intensity": 6.0 * s, "elevation_deg": 12.0, "azimuth_deg": 35.0, "ambient_scale": 1.0 - 0.6 * min(s, 1.0)}
+
+
+def _apply_harsh_lighting(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
+    # A bright, low spotlight skimming the workspace from one side (a halogen
+    # lamp parallel to the table): a saturated patch and hard light/dark contrast.
+    el, az = math.radians(p["elevation_deg"]), math.radians(p["azimuth_deg"])
+    direction = np.array([-math.cos(el) * math.cos(az), -math.cos(el) * math.sin(az), -math.sin(el)])
+    target = np.array([0.0, 0.02, 0.0])
+    pos = target - 0.45 * direction
+    light = spec.worldbody.add_light(name="halogen", pos=pos.tolist(), dir=direction.tolist())
+    light.type = mujoco.mjtLightType.mjLIGHT_SPOT
+    light.cutoff = 35.0
+    light.exponent = 2.0
+    light.castshadow = False
+    light.diffuse = [p["intensity"]] * 3
+    light.specular = [0.5 * p["intensity"]] * 3
+    light.attenuation = [1.0, 0.0, 0.0]
+    spec.visual.headlight.ambient = (np.asarray(spec.visual.headlight.ambient) * p["ambient_scale"]).tolist()
+    for lt in spec.lights:
+        if lt.name == "ceiling":
+            lt.diffuse = (np.asarray(lt.diffuse) * p["ambient_scale"]).tolist()
+
+
+def _checkerboard_params(s: float) -> dict[str, float]:
+    return {"square_cm": 2.54, "contrast": min(1.0, s)}
+
+
+def _apply_checkerboard(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
+    c = p["contrast"]
+    spec.add_texture(
+        name="checker", type=mujoco.mjtTexture.mjTEXTURE_2D, builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
+        rgb1=[0.5 + 0.5 * c] * 3, rgb2=[0.5 - 0.5 * c] * 3, width=64, height=64,
+    )
+    mat = spec.material("bin_floor")
+    mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "checker"
+    mat.texuniform = True
+    # One texture repeat holds 2x2 squares; texuniform repeats count per metre.
+    reps = 1.0 / (2.0 * p["square_cm"] / 100.0)
+    mat.texrepeat = [reps, reps]
+    mat.rgba = [1, 1, 1, 1]
+
+
+def _transparent_params(s: float) -> dict[str, float]:
+    return {"opacity": float(max(0.02, 1.0 - 0.85 * s))}
+
+
+def _apply_transparent(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
+    for g in spec.geoms:
+        if g.name.startswith("object"):
+            g.rgba = [0.85, 0.9, 0.92, p["opacity"]]  # clear plastic: pale, see-through
+            if g.material:
+                g.material = ""
+
+
+def _extend_params(s: float) -> dict[str, float]:
+    return {"extension_cm": 1.0 * s, "width_scale": 1.0 / (1.0 + 0.6 * min(s, 1.0)), "stiffness_scale": 1.0 + min(s, 1.0)}
+
+
+def _apply_extend(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
+    ext = p["extension_cm"] / 100.0
+    for side in ("left", "right"):
+        g = spec.geom(f"finger_{side}")
+        size = list(g.size)
+        size[1] *= p["width_scale"]  # narrower
+        size[2] += ext / 2.0  # longer
+        g.size = size
+        pos = list(g.pos)
+        pos[2] -= ext / 2.0
+        g.pos = pos
+        g.solref = [0.02 / p["stiffness_scale"], 1.0]  # less compliant
+
+
+def _offset_params(s: float) -> dict[str, float]:
+    return {"offset_cm": 10.0 * s}
+
+
+def _apply_offset(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
+    body = spec.body("finger_mount")
+    pos = list(body.pos)
+    pos[1] += p["offset_cm"] / 100.0
+    body.pos = pos
+    bracket = spec.geom("offset_bracket")
+    half = max(p["offset_cm"] / 200.0, 1e-4)
+    bracket.size = [0.008, half, 0.006]
+    bracket.pos = [0.0, half, -0.012]
+
+
+SHIFTS: dict[str, ShiftDef] = {
+    d.name: d
+    for d in [
+        ShiftDef("harsh_lighting", "lighting", 3.0, _harsh_lighting_params, _apply_harsh_lighting,
+                 "a bright low spotlight skims the bin: intensity 6x ambient at severity 1, 12 deg elevation"),
+        ShiftDef("checkerboard_backing", "background", 1.0, _checkerboard_params, _apply_checkerboard,
+                 "a black/white checkerboard with one-inch squares under the bin; severity is contrast"),
+        ShiftDef("transparent_objects", "unseen objects", 1.15, _transparent_params, _apply_transparent,
+                 "objects become clear plastic: opacity 1 - 0.85*severity (0.15 at severity 1)"),
+        ShiftDef("extend_gripper", "gripper shape", 5.0, _extend_params, _apply_extend,
+                 "fingers 1 cm longer per unit severity, narrower and stiffer"),
+        ShiftDef("offset_gripper", "morphology", 2.0, _offset_params, _apply_offset,
+                 "fingers offset laterally from the controlled wrist by 10 cm per unit severity"),
+    ]
+}
+SHIFT_NAMES = (BASE, *SHIFTS)
+
+
+@dataclass(frozen=True)
+class Shift:
+    """One applied shift: a registered name and a severity."""
+
+    name: str
+    severity: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.name not in SHIFTS:
+            raise unknown("shift", self.name, SHIFT_NAMES, "run `nsl render --help` for the list")
+        d = SHIFTS[self.name]
+        if not (isinstance(self.severity, (int, float)) and 0.0 <= self.severity <= d.max_severity):
+            raise ConfigError(
+                f"severity {self.severity!r} for shift {self.name!r} is out of range; "
+                f"use a value in [0, {d.max_severity}] (1.0 is the study's default)"
+            )
+
+    @property
+    def params(self) -> dict[str, float]:
+        return SHIFTS[self.name].params(float(self.severity))
+
+    def apply(self, spec: mujoco.MjSpec) -> None:
+        SHIFTS[self.name].apply(spec, self.params)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "severity": float(self.severity), "params": self.params}
+
+
+@dataclass(frozen=True)
+class ShiftSpec:
+    """An ordered composition of shifts; empty means the base task."""
+
+    shifts: tuple[Shift, ...] = field(default_factory=tuple)
+
+    @property
+    def name(self) -> str:
+        if not self.shifts:
+            return BASE
+        return "+".join(s.name if s.severity == 1.0 else f"{s.name}@{s.severity:g}" for s in self.shifts)
+
+    def apply(self, spec: mujoco.MjSpec) -> None:
+        for s in self.shifts:
+            s.apply(spec)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"version": SHIFT_SPEC_VERSION, "name": self.name, "shifts": [s.to_dict() for s in self.shifts]}
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), sort_keys=True)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ShiftSpec:
+        v = d.get("version")
+        if v != SHIFT_SPEC_VERSION:
+            raise IncompatibleVersionError(
+                f"shift spec version {v!r} is not supported (this nsl reads version {SHIFT_SPEC_VERSION}); "
+                "upgrade nsl or re-create the dataset"
+            )
+        return cls(tuple(Shift(s["name"], float(s["severity"])) for s in d["shifts"]))
+
+    @classmethod
+    def from_json(cls, text: str) -> ShiftSpec:
+        return cls.from_dict(json.loads(text))
+
+    def __str__(self) -> str:
+        return self.name
+
+
+def parse_shift(text: str, severity: float | None = None) -> ShiftSpec:
+    """Parse ``NAME[@SEVERITY][+NAME[@SEVERITY]...]``; ``base`` is no shift.
+
+    ``severity`` (from ``--severity``) applies to every part that gives none.
+    """
+    text = (text or "").strip()
+    if not text:
+        raise ConfigError("empty shift name; use one of " + ", ".join(SHIFT_NAMES))
+    parts = []
+    for token in text.split("+"):
+        name, _, sev = token.strip().partition("@")
+        if name == BASE:
+            continue
+        if sev:
+            try:
+                value = float(sev)
+            except ValueError:
+                raise ConfigError(f"severity {sev!r} in shift {token!r} is not a number; write e.g. {name}@1.5") from None
+        else:
+            value = 1.0 if severity is None else float(severity)
+        parts.append(Shift(name, value))
+    return ShiftSpec(tuple(parts))
+
+
+def parse_shift_list(text: str, severity: float | None = None) -> list[ShiftSpec]:
+    """Parse a comma-separated list of shift specs; ``all`` is base plus the five shifts."""
+    if text.strip() == "all":
+        return [parse_shift(n, severity) for n in SHIFT_NAMES]
+    return [parse_shift(t, severity) for t in text.split(",") if t.strip()] or [parse_shift("", severity)]

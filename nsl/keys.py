@@ -1,0 +1,27 @@
+"""Feature and batch keys, shared by the dataset format, the loader and the learner.
+
+They follow LeRobot's conventions (``observation.*``, ``action``, ``next.*``).
+Learner and loader code uses these names, never string literals.
+"""
+
+OBS_IMAGE = "observation.image"  # (H, W, 3) uint8 camera frame
+OBS_STATE = "observation.state"  # (2,) float32: gripper opening, wrist height
+ACTION = "action"  # (6,) float32: dx, dy, dz, dyaw, close, terminate in [-1, 1]
+REWARD = "next.reward"  # float32: 1 on the step that lifts an object
+DONE = "next.done"  # bool: the episode terminated (not a time-limit truncation)
+SUCCESS = "next.success"  # bool: the episode's grasp succeeded (on its last frame)
+TRUNCATED = "next.truncated"  # bool: the episode hit its time limit without terminating
+
+EPISODE_INDEX = "episode_index"
+FRAME_INDEX = "frame_index"
+INDEX = "index"
+TIMESTAMP = "timestamp"
+TASK_INDEX = "task_index"
+
+# Transition batches produced by the training loader.
+NEXT_OBS_IMAGE = "next.observation.image"
+NEXT_OBS_STATE = "next.observation.state"
+
+STATE_NAMES = ["gripper_opening", "wrist_height"]
+ACTION_NAMES = ["dx", "dy", "dz", "dyaw", "close", "terminate"]
+FPS = 10  # nominal control rate recorded in dataset metadata (one frame per control step)
