@@ -69,7 +69,8 @@ class EnvConfig:
     object_size: tuple[float, float] = (0.03, 0.055)  # range of an object's middle extent (m)
     move_step: float = 0.03  # metres of x/y (and z in full mode) per unit action
     yaw_step: float = 0.35  # radians of yaw per unit action
-    substeps: int = 30  # physics steps per control step (2 ms each)
+    substeps: int = 25  # physics steps per control step near objects (2 ms each)
+    settle_steps: int = 80  # physics steps for dropped objects to come to rest before the first frame
     lift_threshold: float = 0.10  # object centre height (m) above the table that counts as lifted
     grasp_clearance: float = 0.002  # finger-tip height above the floor at the bottom of a descent (m)
 
@@ -167,18 +168,32 @@ class GraspEnv(gym.Env):
         n = int(rng.integers(c.min_objects, c.max_objects + 1))
         ids = rng.choice(len(self._object_ids), size=n, replace=False)
         spread = BIN_HALF - 0.045
-        out = []
+        out: list[ObjectSpec] = []
+        placed: list[tuple[float, float, float]] = []  # x, y, radius of objects already placed
         for k, idx in enumerate(ids):
             mesh = objlib.load_mesh(self._object_ids[int(idx)])
             size = rng.uniform(*c.object_size)
+            scale = objlib.scale_for(mesh, size)
+            radius = 0.5 * float(np.linalg.norm(mesh.extents * scale))
             q = rng.normal(size=4)
             q /= np.linalg.norm(q)
+            # Drop each object just above the floor where it overlaps no other object
+            # (a short fall settles fast); if the bin is too crowded, stack it above.
+            x, y = rng.uniform(-spread, spread, 2)
+            z = radius + 0.002
+            for _ in range(20):
+                if all((x - px) ** 2 + (y - py) ** 2 > (radius + pr) ** 2 for px, py, pr in placed):
+                    break
+                x, y = rng.uniform(-spread, spread, 2)
+            else:
+                z = radius + 0.002 + 2 * max(pr for _, _, pr in placed) * len(placed)
+            placed.append((float(x), float(y), radius))
             out.append(ObjectSpec(
                 mesh_id=self._object_ids[int(idx)],
-                scale=tuple(float(x) for x in objlib.scale_for(mesh, size)),
+                scale=tuple(float(v) for v in scale),
                 rgba=_random_colour(rng),
-                pos=(float(rng.uniform(-spread, spread)), float(rng.uniform(-spread, spread)), 0.035 + 0.04 * k),
-                quat=tuple(float(x) for x in q),
+                pos=(float(x), float(y), float(z)),
+                quat=tuple(float(v) for v in q),
             ))
         return out
 
@@ -213,7 +228,7 @@ class GraspEnv(gym.Env):
         d.qpos[h.qpos["finger_left"]] = d.qpos[h.qpos["finger_right"]] = FINGER_OPEN
         self._apply_ctrl()
         # Let the dropped objects settle in the bin.
-        mujoco.mj_step(m, d, 150)
+        mujoco.mj_step(m, d, self.config.settle_steps)
         self._descent = (start[2] - self._grasp_wrist_z()) / self.config.steps
         self._t = 0
         self._done = False
@@ -263,15 +278,15 @@ class GraspEnv(gym.Env):
     def _grasp_and_lift(self, close: bool = True) -> None:
         m, d = self.model, self.data
         if close:
-            for k in range(1, 7):  # close gradually so the object is centred, not flicked out
-                self._fingers = FINGER_OPEN * (1 - k / 6)
+            for k in range(1, 6):  # close gradually so the object is centred, not flicked out
+                self._fingers = FINGER_OPEN * (1 - k / 5)
                 self._apply_ctrl()
-                mujoco.mj_step(m, d, 20)
-            mujoco.mj_step(m, d, 40)
+                mujoco.mj_step(m, d, 14)
+            mujoco.mj_step(m, d, 25)
         lift = self._target.copy()
         lift[2] = self._grasp_wrist_z() + 0.14
-        self._move_to(lift, 100)
-        mujoco.mj_step(m, d, 30)
+        self._move_to(lift, 80)
+        mujoco.mj_step(m, d, 20)
 
     def step(self, action: np.ndarray):
         if self._done:
@@ -290,7 +305,7 @@ class GraspEnv(gym.Env):
             target[2] = self._grasp_wrist_z() if last else max(self._grasp_wrist_z(), target[2] - self._descent)
             self._move_to(target, c.substeps * (2 if last else 1))
             if last:
-                mujoco.mj_step(self.model, self.data, 30)  # settle at grasp height
+                mujoco.mj_step(self.model, self.data, 15)  # settle at grasp height
                 self._grasp_and_lift(close=True)
                 terminated = grasp = True
         else:

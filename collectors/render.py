@@ -86,6 +86,7 @@ class SceneRenderer:
     def render(self, model: mujoco.MjModel, data: mujoco.MjData, camera: str) -> np.ndarray:
         """An (H, W, 3) uint8 image from the named camera (a new array)."""
         ctx, scene = self._bind(model)
+        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, ctx)  # each context has its own buffer
         self._cam.type = mujoco.mjtCamera.mjCAMERA_FIXED
         self._cam.fixedcamid = model.camera(camera).id
         mujoco.mjv_updateScene(model, data, self._opt, None, self._cam, mujoco.mjtCatBit.mjCAT_ALL.value, scene)

@@ -92,10 +92,12 @@ def build_spec(objects: list[ObjectSpec], shift: ShiftSpec, image_size: int = 64
     ceiling.castshadow = False
 
     box, plane = mujoco.mjtGeom.mjGEOM_BOX, mujoco.mjtGeom.mjGEOM_PLANE
-    world.add_geom(name="table", type=box, size=[0.5, 0.5, 0.02], pos=[0, 0, -0.02], rgba=[0.55, 0.42, 0.3, 1])
+    world.add_geom(name="table", type=box, size=[0.5, 0.5, 0.02], pos=[0, 0, -0.0205], rgba=[0.55, 0.42, 0.3, 1],
+                   contype=0, conaffinity=0)
+    # The bin floor is a plane: for collisions a half-space, so nothing can tunnel through it.
     spec.add_material(name="bin_floor", rgba=[0.42, 0.44, 0.47, 1])
-    world.add_geom(name="bin_floor", type=plane, size=[BIN_HALF, BIN_HALF, 0.01], pos=[0, 0, 0.0005],
-                   material="bin_floor", contype=0, conaffinity=0)
+    world.add_geom(name="bin_floor", type=plane, size=[BIN_HALF, BIN_HALF, 0.01], pos=[0, 0, 0.0],
+                   material="bin_floor")
     wall = [0.62, 0.64, 0.68, 1]
     for i, (x, y, hx, hy) in enumerate([
         (BIN_HALF + BIN_WALL_T, 0, BIN_WALL_T, BIN_HALF + 2 * BIN_WALL_T),
@@ -159,10 +161,11 @@ def _add_gripper(spec: mujoco.MjSpec) -> None:
         act.forcelimited = True
         act.forcerange = [-force, force]
 
-    position("act_x", "wrist_x", 3000.0, 200.0)
-    position("act_y", "wrist_y", 3000.0, 200.0)
-    position("act_z", "wrist_z", 3000.0, 200.0)
-    position("act_yaw", "wrist_yaw", 50.0, 20.0)
+    # Force limits like a real arm's: strong enough to move briskly, too weak to crush objects into the floor.
+    position("act_x", "wrist_x", 3000.0, 60.0)
+    position("act_y", "wrist_y", 3000.0, 60.0)
+    position("act_z", "wrist_z", 3000.0, 60.0)
+    position("act_yaw", "wrist_yaw", 200.0, 40.0)
     for side in ("left", "right"):
         position(f"act_finger_{side}", f"finger_{side}", 400.0, 12.0)
 

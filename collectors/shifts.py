@@ -41,7 +41,7 @@ class ShiftDef:
 
 
 def _harsh_lighting_params(s: float) -> dict[str, float]:
-    return {"intensity": 6.0 * s, "elevation_deg": 12.0, "azimuth_deg": 35.0, "ambient_scale": 1.0 - 0.6 * min(s, 1.0)}
+    return {"intensity": 10.0 * s, "elevation_deg": 12.0, "azimuth_deg": 35.0, "ambient_scale": 1.0 - 0.6 * min(s, 1.0)}
 
 
 def _apply_harsh_lighting(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
@@ -77,9 +77,10 @@ def _apply_checkerboard(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
     )
     mat = spec.material("bin_floor")
     mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "checker"
-    mat.texuniform = True
-    # One texture repeat holds 2x2 squares; texuniform repeats count per metre.
-    reps = 1.0 / (2.0 * p["square_cm"] / 100.0)
+    mat.texuniform = False
+    # The floor plane is 30 cm wide; one repeat of the builtin checker spans four squares
+    # across it (measured from renders), so 2.95 repeats give twelve one-inch squares.
+    reps = 0.30 / (4.0 * p["square_cm"] / 100.0)
     mat.texrepeat = [reps, reps]
     mat.rgba = [1, 1, 1, 1]
 
@@ -133,7 +134,7 @@ SHIFTS: dict[str, ShiftDef] = {
     d.name: d
     for d in [
         ShiftDef("harsh_lighting", "lighting", 3.0, _harsh_lighting_params, _apply_harsh_lighting,
-                 "a bright low spotlight skims the bin: intensity 6x ambient at severity 1, 12 deg elevation"),
+                 "a bright low spotlight skims the bin: intensity 10 at severity 1 (the room light is 0.5), 12 deg elevation"),
         ShiftDef("checkerboard_backing", "background", 1.0, _checkerboard_params, _apply_checkerboard,
                  "a black/white checkerboard with one-inch squares under the bin; severity is contrast"),
         ShiftDef("transparent_objects", "unseen objects", 1.15, _transparent_params, _apply_transparent,

@@ -1,0 +1,228 @@
+"""Catalog entries as small frozen records, and the reference grammar.
+
+References used throughout the CLI::
+
+    ckpt:NAME               newest checkpoint registered under NAME (same as @latest)
+    ckpt:NAME@STEP          the checkpoint of NAME saved at gradient step STEP
+    ckpt:NAME@best          highest evaluated success rate on the shift NAME was trained for
+    ckpt:NAME@best:SHIFT    ... on SHIFT instead (e.g. ckpt:harsh@best:base)
+    ckpt:NAME@TAG           the checkpoint tagged TAG, which must be one of NAME's
+    ckpt:TAG                a tag used as an alias (e.g. ckpt:base)
+    ckpt:3fa9c2d41e7b       an id prefix (6 or more hex digits)
+    data:NAME[@vN][:TIER]   dataset NAME, version N (default: the newest); TIER is passed to the loader
+
+The ``ckpt:`` prefix is optional where only a checkpoint makes sense.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from nsl.errors import ConfigError
+
+CKPT_PREFIX = "ckpt:"
+DATA_PREFIX = "data:"
+NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
+TIER_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._=-]*")
+HEX_RE = re.compile(r"[0-9a-f]{6,64}")
+RESERVED = ("best", "latest")  # selectors that cannot be tag names
+SHORT_ID = 12  # hex digits shown for a checkpoint id
+
+
+def check_name(kind: str, name: str) -> str:
+    """Validate a dataset, checkpoint or tag name; return it."""
+    if not isinstance(name, str) or not NAME_RE.fullmatch(name):
+        raise ConfigError(f"{kind} name {name!r} is not valid; use letters, digits, '.', '_' and '-' "
+                          "(no '@', ':' or spaces), starting with a letter or digit")
+    return name
+
+
+@dataclass(frozen=True)
+class DataUse:
+    """One dataset a checkpoint was trained on, with its share of each batch."""
+
+    dataset: str
+    version: int
+    weight: float = 1.0  # fraction of each batch drawn from this dataset (e.g. 0.5 for a 50/50 mix)
+    tier: str | None = None  # the subset used (e.g. "800" attempts), as given in data:NAME@vN:TIER
+    hash: str = ""  # the dataset's content hash, filled in from the catalog at registration
+
+    def __post_init__(self) -> None:
+        check_name("dataset", self.dataset)
+        if not isinstance(self.version, int) or self.version < 1:
+            raise ConfigError(f"dataset version {self.version!r} for {self.dataset!r} must be an integer >= 1")
+        if not (isinstance(self.weight, (int, float)) and self.weight > 0):
+            raise ConfigError(f"weight {self.weight!r} for dataset {self.dataset!r} must be a positive number")
+
+    @property
+    def ref(self) -> str:
+        return f"{DATA_PREFIX}{self.dataset}@v{self.version}" + (f":{self.tier}" if self.tier else "")
+
+
+@dataclass(frozen=True)
+class DatasetEntry:
+    name: str
+    version: int
+    hash: str  # content hash from the dataset's manifest
+    shift: dict[str, Any]  # shift spec (ShiftSpec.to_dict()); shift["name"] is e.g. "harsh_lighting"
+    episodes: int
+    provenance: dict[str, Any]  # how it was collected: config, policy, seeds, code version
+    path: str
+    created: str
+    files: dict[str, str] = field(default_factory=dict, repr=False)  # relative path -> sha256 at registration
+
+    @property
+    def ref(self) -> str:
+        return f"{self.name}@v{self.version}"
+
+    @property
+    def shift_name(self) -> str:
+        return str(self.shift.get("name", "base"))
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class CheckpointEntry:
+    id: str  # sha256 over model.safetensors and config.json (see folders.checkpoint_id)
+    name: str
+    step: int
+    parent: str | None  # id of the checkpoint training started from; None for training from scratch
+    shift: str  # the shift it was trained for; the default for @best
+    data: tuple[DataUse, ...]
+    config: dict[str, Any]  # content of config.json
+    code_version: str
+    path: str
+    created: str
+    files: dict[str, str] = field(default_factory=dict, repr=False)  # file name -> sha256
+
+    @property
+    def ref(self) -> str:
+        return f"{self.name}@{self.step}"
+
+    @property
+    def short_id(self) -> str:
+        return self.id[:SHORT_ID]
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["data"] = [asdict(u) for u in self.data]
+        return d
+
+
+@dataclass(frozen=True)
+class EvaluationEntry:
+    id: int
+    checkpoint: str
+    shift: str  # shift spec name, e.g. "harsh_lighting" or "base"
+    split: str  # object split: "train" or "test"
+    episodes: int
+    successes: int
+    ci_low: float  # 95% interval of the success rate
+    ci_high: float
+    seed: int
+    created: str
+    extra: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    @property
+    def rate(self) -> float:
+        return self.successes / self.episodes
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class CheckpointRef:
+    name: str
+    selector: str | None = None  # None (latest), "latest", "best", a step ("1500") or a tag
+    shift: str | None = None  # only with "best": the shift to rank on
+
+    def __str__(self) -> str:
+        sel = f"@{self.selector}" if self.selector else ""
+        return f"{CKPT_PREFIX}{self.name}{sel}" + (f":{self.shift}" if self.shift else "")
+
+
+@dataclass(frozen=True)
+class DataRef:
+    name: str
+    version: int | None = None  # None: the newest registered version
+    tier: str | None = None
+
+    def __str__(self) -> str:
+        v = f"@v{self.version}" if self.version is not None else ""
+        return f"{DATA_PREFIX}{self.name}{v}" + (f":{self.tier}" if self.tier else "")
+
+
+@dataclass(frozen=True)
+class ResolvedData:
+    """A ``data:`` reference resolved to its catalog row; the tier is for the datasets loader."""
+
+    dataset: DatasetEntry
+    tier: str | None = None
+
+    def use(self, weight: float = 1.0) -> DataUse:
+        """The :class:`DataUse` to record when training on this data with ``weight``."""
+        return DataUse(self.dataset.name, self.dataset.version, weight, self.tier, self.dataset.hash)
+
+
+def parse_checkpoint_ref(text: str) -> CheckpointRef:
+    """Parse ``[ckpt:]NAME[@STEP|@best[:SHIFT]|@latest|@TAG]``."""
+    body = text.strip()
+    if body.startswith(DATA_PREFIX):
+        raise ConfigError(f"{text!r} is a dataset reference; a checkpoint is wanted, e.g. ckpt:base@latest")
+    body = body.removeprefix(CKPT_PREFIX)
+    name, at, selector = body.partition("@")
+    check_name("checkpoint", name)
+    if not at:
+        return CheckpointRef(name)
+    shift = None
+    if selector.startswith("best:"):
+        selector, shift = "best", selector[len("best:"):]
+        if not shift:
+            raise ConfigError(f"reference {text!r} has an empty shift after @best:; write e.g. ckpt:{name}@best:base")
+    if not (selector.isdigit() or selector in RESERVED or NAME_RE.fullmatch(selector)):
+        raise ConfigError(f"reference {text!r} has an invalid selector {selector!r}; "
+                          "use @STEP, @best, @best:SHIFT, @latest or @TAG")
+    return CheckpointRef(name, selector, shift)
+
+
+def parse_data_ref(text: str) -> DataRef:
+    """Parse ``[data:]NAME[@vN][:TIER]``."""
+    body = text.strip()
+    if body.startswith(CKPT_PREFIX):
+        raise ConfigError(f"{text!r} is a checkpoint reference; a dataset is wanted, e.g. data:grasp-base@v1")
+    body = body.removeprefix(DATA_PREFIX)
+    body, colon, tier = body.partition(":")
+    name, at, version = body.partition("@")
+    check_name("dataset", name)
+    v = None
+    if at:
+        if not re.fullmatch(r"v[0-9]+", version) or int(version[1:]) < 1:
+            raise ConfigError(f"dataset reference {text!r} has version {version!r}; write it as @vN, "
+                              f"e.g. data:{name}@v1")
+        v = int(version[1:])
+    if colon and not TIER_RE.fullmatch(tier):
+        raise ConfigError(f"dataset reference {text!r} has an invalid tier {tier!r}; e.g. data:{name}@v1:800")
+    return DataRef(name, v, tier or None)
+
+
+def dumps(obj: Any) -> str:
+    """Canonical JSON for catalog columns."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"))
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """95% Wilson score interval of a success rate (used when the caller gives none)."""
+    if n <= 0:
+        return (0.0, 1.0)
+    p = successes / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return (max(0.0, centre - half), min(1.0, centre + half))

@@ -1,0 +1,419 @@
+"""The catalog: datasets, checkpoints, evaluations and tags in one SQLite file.
+
+Entries are append-only.  Registering what is already there (same dataset
+name, version and hash; same checkpoint id; same evaluation) returns the
+existing entry; registering something different under an existing key is
+refused; nothing updates a row.  Tags are pointers and may move, but every
+move is a new row, so their history is kept too.
+
+Every write is one ``BEGIN IMMEDIATE`` transaction, so several collection,
+training and evaluation processes can register at the same time: they queue
+for the write lock (busy timeout plus retries) and never lose an entry.
+Files come first: a checkpoint folder or dataset folder is complete on disk
+before the row that points to it is committed.
+
+Usage::
+
+    from nsl.catalog import Catalog
+
+    with Catalog() as cat:                       # $NSL_HOME/catalog.sqlite
+        base = cat.resolve_data("data:grasp-base@v1")
+        entry = cat.save_checkpoint("base", 20000, weights_bytes, config, data=[base.use(1.0)])
+        cat.add_evaluation(entry.id, "base", episodes=100, successes=83, seed=1000)
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import sqlite3
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from nsl import workspace
+from nsl.errors import ConfigError, unknown
+
+from . import schema
+from .card import render_model_card
+from .folders import CARD_FILE, checkpoint_id, folder_digests, hash_tree, read_config, write_card, write_model_folder
+from .records import (
+    RESERVED, CheckpointEntry, DatasetEntry, DataUse, EvaluationEntry, ResolvedData, check_name, dumps,
+    parse_data_ref, wilson_interval,
+)
+
+
+@functools.cache
+def _code_version() -> str:
+    from nsl import code_version
+
+    return code_version()
+
+
+class Catalog:
+    """An open catalog.  One per process (open it again after fork); close it or use ``with``."""
+
+    def __init__(self, path: Path | str | None = None):
+        self.path = Path(path) if path is not None else workspace.catalog_path()
+        self.conn = schema.connect(self.path, code_version=_code_version())
+
+    def close(self) -> None:
+        self.conn.close()
+
+    def __enter__(self) -> Catalog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @contextmanager
+    def write(self) -> Iterator[sqlite3.Connection]:
+        """One write transaction holding the database's write lock from its first statement."""
+        schema.begin_immediate(self.conn)
+        try:
+            yield self.conn
+            self.conn.execute("COMMIT")
+        except BaseException:
+            self.conn.execute("ROLLBACK")
+            raise
+
+    # ---------------------------------------------------------------- paths
+    @staticmethod
+    def _store_path(path: Path) -> str:
+        """Paths under the workspace are stored relative to it, so NSL_HOME can move."""
+        path = Path(path).resolve()
+        try:
+            return path.relative_to(workspace.home().resolve()).as_posix()
+        except ValueError:
+            return str(path)
+
+    @staticmethod
+    def _load_path(stored: str) -> str:
+        p = Path(stored)
+        return str(p if p.is_absolute() else workspace.home().resolve() / p)
+
+    # ------------------------------------------------------------- datasets
+    def register_dataset(self, name: str, version: int, path: Path | str, *, hash: str,
+                         shift: Mapping[str, Any] | str, episodes: int,
+                         provenance: Mapping[str, Any] | None = None) -> DatasetEntry:
+        """Record a dataset version that is complete on disk at ``path``.
+
+        ``hash`` is the content hash from the dataset's manifest; ``shift``
+        the shift spec dict (``ShiftSpec.to_dict()``) or just its name.  The
+        catalog also records a sha256 of every file under ``path`` for
+        ``verify``.  Idempotent for the same hash; a different hash under an
+        existing name and version is refused.
+        """
+        check_name("dataset", name)
+        if not isinstance(version, int) or version < 1:
+            raise ConfigError(f"dataset version {version!r} for {name!r} must be an integer >= 1")
+        if not isinstance(hash, str) or not hash:
+            raise ConfigError(f"dataset {name}@v{version} needs its content hash (from its manifest)")
+        if not isinstance(episodes, int) or episodes < 0:
+            raise ConfigError(f"episodes {episodes!r} for dataset {name}@v{version} must be an integer >= 0")
+        shift_d = {"name": shift} if isinstance(shift, str) else dict(shift)
+        if not isinstance(shift_d.get("name"), str):
+            raise ConfigError(f"shift {shift!r} for dataset {name}@v{version} needs a 'name' (e.g. 'base')")
+        path = Path(path)
+        if not path.exists():
+            raise ConfigError(f"dataset path {path} does not exist; write the dataset before registering it")
+        files = hash_tree(path)
+        row = (name, version, hash, dumps(shift_d), episodes, dumps(dict(provenance or {})),
+               self._store_path(path), dumps(files), schema.utc_now())
+        with self.write() as c:
+            old = c.execute("SELECT * FROM datasets WHERE name = ? AND version = ?", (name, version)).fetchone()
+            if old is None:
+                c.execute("INSERT INTO datasets (name, version, hash, shift, episodes, provenance, path, files, "
+                          "created) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", row)
+        if old is not None:
+            existing = self._dataset_row(old)
+            if existing.hash != hash:
+                raise ConfigError(
+                    f"dataset {name}@v{version} is already registered with hash {existing.hash[:12]}, not "
+                    f"{hash[:12]}; catalog entries are append-only: write the new data as "
+                    f"{name}@v{self.next_dataset_version(name)}")
+            return existing
+        return self.dataset(name, version)
+
+    def next_dataset_version(self, name: str) -> int:
+        """One more than the newest registered version of ``name`` (1 if none)."""
+        (v,) = self.conn.execute("SELECT MAX(version) FROM datasets WHERE name = ?", (name,)).fetchone()
+        return (v or 0) + 1
+
+    def dataset(self, name: str, version: int | None = None) -> DatasetEntry:
+        """The row for ``name`` at ``version`` (default: the newest); unknown names list near matches."""
+        if version is None:
+            r = self.conn.execute("SELECT * FROM datasets WHERE name = ? ORDER BY version DESC LIMIT 1",
+                                  (name,)).fetchone()
+        else:
+            r = self.conn.execute("SELECT * FROM datasets WHERE name = ? AND version = ?", (name, version)).fetchone()
+        if r is None:
+            versions = [v for (v,) in self.conn.execute("SELECT version FROM datasets WHERE name = ?", (name,))]
+            if versions:
+                raise unknown(f"version of dataset {name!r}", f"v{version}", [f"v{v}" for v in versions])
+            names = [n for (n,) in self.conn.execute("SELECT DISTINCT name FROM datasets")]
+            raise unknown("dataset", name, names, "list datasets with `nsl catalog ls datasets`")
+        return self._dataset_row(r)
+
+    def datasets(self, name: str | None = None) -> list[DatasetEntry]:
+        q, a = ("SELECT * FROM datasets WHERE name = ? ORDER BY seq", (name,)) if name else (
+            "SELECT * FROM datasets ORDER BY seq", ())
+        return [self._dataset_row(r) for r in self.conn.execute(q, a)]
+
+    def resolve_data(self, ref: str) -> ResolvedData:
+        """``data:NAME[@vN][:TIER]`` -> the dataset row plus the tier (for the datasets loader)."""
+        d = parse_data_ref(ref)
+        return ResolvedData(self.dataset(d.name, d.version), d.tier)
+
+    def _dataset_row(self, r: tuple) -> DatasetEntry:
+        _seq, name, version, h, shift, episodes, prov, path, files, created = r
+        return DatasetEntry(name, version, h, json.loads(shift), episodes, json.loads(prov), self._load_path(path),
+                            created, json.loads(files))
+
+    # ---------------------------------------------------------- checkpoints
+    def save_checkpoint(self, name: str, step: int, weights: bytes | Path, config: Mapping[str, Any], *,
+                        parent: str | None = None, data: Sequence[DataUse] = (), shift: str | None = None,
+                        card_info: Mapping[str, Any] | None = None, code_version: str | None = None,
+                        dest: Path | None = None) -> CheckpointEntry:
+        """Write a model folder under ``$NSL_HOME/checkpoints/NAME/`` and register it.
+
+        ``weights``: safetensors bytes or a ``.safetensors`` path; ``config``:
+        the JSON-able model/training config (becomes ``config.json``);
+        ``parent``: id of the checkpoint training started from (None: from
+        scratch); ``data``: the datasets trained on with their batch weights;
+        ``shift``: the shift it is trained for (default: the shift of the last
+        dataset in ``data``, else the parent's, else "base").
+        """
+        from .folders import CONFIG_FILE, WEIGHTS_FILE, encode_config  # noqa: F401  (same module family)
+        import hashlib
+
+        check_name("checkpoint", name)
+        config_bytes = encode_config(config)
+        wdigest = (hashlib.sha256(bytes(weights)).hexdigest() if isinstance(weights, (bytes, bytearray, memoryview))
+                   else None)
+        if wdigest is None:
+            from .folders import file_sha256
+
+            wdigest = file_sha256(Path(weights))
+        files = {WEIGHTS_FILE: wdigest, CONFIG_FILE: hashlib.sha256(config_bytes).hexdigest()}
+        entry = self._new_checkpoint(checkpoint_id(files), name, step, parent, data, shift, dict(config),
+                                     code_version, Path("."), files)
+        existing = self._checkpoint_or_none(entry.id)
+        if existing is not None:
+            self._check_same(existing, entry)
+            return existing
+        dest = Path(dest) if dest is not None else workspace.checkpoints_dir() / name / f"{step:08d}-{entry.short_id}"
+        write_model_folder(dest, weights, config, self._card(entry, card_info))
+        return self._insert_checkpoint(entry, dest)
+
+    def register_checkpoint(self, folder: Path | str, *, name: str, step: int, parent: str | None = None,
+                            data: Sequence[DataUse] = (), shift: str | None = None,
+                            card_info: Mapping[str, Any] | None = None,
+                            code_version: str | None = None) -> CheckpointEntry:
+        """Register a folder that already holds ``model.safetensors`` and ``config.json``.
+
+        Writes its ``README.md`` card, then the row.  Arguments as in
+        :meth:`save_checkpoint`.
+        """
+        check_name("checkpoint", name)
+        folder = Path(folder)
+        files = folder_digests(folder)
+        entry = self._new_checkpoint(checkpoint_id(files), name, step, parent, data, shift, read_config(folder),
+                                     code_version, folder, files)
+        existing = self._checkpoint_or_none(entry.id)
+        if existing is not None:
+            self._check_same(existing, entry)
+            return existing
+        write_card(folder, self._card(entry, card_info))
+        return self._insert_checkpoint(entry, folder)
+
+    def _new_checkpoint(self, cid: str, name: str, step: int, parent: str | None, data: Sequence[DataUse],
+                        shift: str | None, config: dict, code_version: str | None, path: Path,
+                        files: dict[str, str]) -> CheckpointEntry:
+        if not isinstance(step, int) or step < 0:
+            raise ConfigError(f"step {step!r} for checkpoint {name!r} must be an integer >= 0")
+        parent_entry = self.checkpoint(parent) if parent else None
+        uses = []
+        for u in data:
+            if not isinstance(u, DataUse):
+                raise ConfigError(f"data entries must be DataUse records (got {u!r}); "
+                                  "use cat.resolve_data('data:NAME@vN').use(weight)")
+            d = self.dataset(u.dataset, u.version)
+            uses.append(DataUse(u.dataset, u.version, float(u.weight), u.tier, d.hash))
+        if shift is None:
+            shift = (self.dataset(uses[-1].dataset, uses[-1].version).shift_name if uses
+                     else parent_entry.shift if parent_entry else "base")
+        if not isinstance(shift, str) or not shift:
+            raise ConfigError(f"shift {shift!r} for checkpoint {name!r} must be a shift name such as 'base'")
+        return CheckpointEntry(cid, name, step, parent_entry.id if parent_entry else None, shift, tuple(uses),
+                               config, code_version or _code_version(), str(path), schema.utc_now(), files)
+
+    @staticmethod
+    def _check_same(existing: CheckpointEntry, new: CheckpointEntry) -> None:
+        def key(e: CheckpointEntry) -> tuple:
+            return e.name, e.step, e.parent, [(u.dataset, u.version, u.weight, u.tier) for u in e.data]
+
+        if key(existing) != key(new):
+            raise ConfigError(
+                f"identical weights and config are already registered as ckpt:{existing.ref} "
+                f"({existing.short_id}) with other name, step, parent or data; entries are append-only, "
+                f"so use ckpt:{existing.ref} instead")
+
+    def _insert_checkpoint(self, e: CheckpointEntry, path: Path) -> CheckpointEntry:
+        with self.write() as c:
+            if c.execute("SELECT 1 FROM checkpoints WHERE id = ?", (e.id,)).fetchone() is None:
+                c.execute("INSERT INTO checkpoints (id, name, step, parent, shift, data, config, code_version, "
+                          "path, files, created) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                          (e.id, e.name, e.step, e.parent, e.shift,
+                           dumps([{"dataset": u.dataset, "version": u.version, "weight": u.weight, "tier": u.tier,
+                                   "hash": u.hash} for u in e.data]),
+                           dumps(e.config), e.code_version, self._store_path(path), dumps(e.files), e.created))
+                c.executemany("INSERT OR IGNORE INTO checkpoint_data (checkpoint, dataset, version) VALUES (?, ?, ?)",
+                              [(e.id, u.dataset, u.version) for u in e.data])
+        existing = self.checkpoint(e.id)
+        self._check_same(existing, e)
+        return existing
+
+    def _checkpoint_row(self, r: tuple) -> CheckpointEntry:
+        _seq, cid, name, step, parent, shift, data, config, code_version, path, files, created = r
+        uses = tuple(DataUse(d["dataset"], d["version"], d["weight"], d["tier"], d["hash"]) for d in json.loads(data))
+        return CheckpointEntry(cid, name, step, parent, shift, uses, json.loads(config), code_version,
+                               self._load_path(path), created, json.loads(files))
+
+    def _checkpoint_or_none(self, cid: str) -> CheckpointEntry | None:
+        r = self.conn.execute("SELECT * FROM checkpoints WHERE id = ?", (cid,)).fetchone()
+        return self._checkpoint_row(r) if r else None
+
+    def checkpoint(self, ref: str) -> CheckpointEntry:
+        """A checkpoint by id, id prefix or any ``ckpt:`` reference."""
+        from .refs import resolve_checkpoint
+
+        return resolve_checkpoint(self, ref)
+
+    def checkpoints(self, name: str | None = None) -> list[CheckpointEntry]:
+        """Checkpoints in registration order (all, or those registered under ``name``)."""
+        q, a = ("SELECT * FROM checkpoints WHERE name = ? ORDER BY seq", (name,)) if name else (
+            "SELECT * FROM checkpoints ORDER BY seq", ())
+        return [self._checkpoint_row(r) for r in self.conn.execute(q, a)]
+
+    def children(self, checkpoint_id: str) -> list[CheckpointEntry]:
+        return [self._checkpoint_row(r) for r in
+                self.conn.execute("SELECT * FROM checkpoints WHERE parent = ? ORDER BY seq", (checkpoint_id,))]
+
+    def trained_on(self, name: str, version: int) -> list[CheckpointEntry]:
+        """Checkpoints whose training data included dataset ``name`` at ``version``."""
+        return [self._checkpoint_row(r) for r in self.conn.execute(
+            "SELECT c.* FROM checkpoints c JOIN checkpoint_data d ON d.checkpoint = c.id "
+            "WHERE d.dataset = ? AND d.version = ? ORDER BY c.seq", (name, version))]
+
+    def lineage(self, ref: str) -> list[CheckpointEntry]:
+        """The checkpoint and its ancestors, newest first (stops at a removed parent)."""
+        chain = [self.checkpoint(ref)]
+        seen = {chain[0].id}
+        while chain[-1].parent and (p := self._checkpoint_or_none(chain[-1].parent)) and p.id not in seen:
+            chain.append(p)
+            seen.add(p.id)
+        return chain
+
+    def resolve_checkpoint(self, ref: str, shift: str | None = None, split: str | None = None) -> CheckpointEntry:
+        """``ckpt:NAME[@STEP|@best[:SHIFT]|@latest|@TAG]`` -> the checkpoint (see :mod:`.refs`)."""
+        from .refs import resolve_checkpoint
+
+        return resolve_checkpoint(self, ref, shift=shift, split=split)
+
+    # ---------------------------------------------------------- model cards
+    def _card(self, entry: CheckpointEntry, info: Mapping[str, Any] | None = None) -> str:
+        ancestors = self.lineage(entry.parent)[0:] if entry.parent else []
+        datasets = {}
+        for u in entry.data:
+            datasets[(u.dataset, u.version)] = self.dataset(u.dataset, u.version)
+        return render_model_card(entry, ancestors, datasets, self.evaluations(entry.id), info)
+
+    def write_model_card(self, checkpoint: str, card_info: Mapping[str, Any] | None = None) -> Path:
+        """Regenerate a checkpoint's ``README.md`` (e.g. after new evaluations); returns its path."""
+        entry = self.checkpoint(checkpoint)
+        return write_card(Path(entry.path), self._card(entry, card_info))
+
+    # ---------------------------------------------------------- evaluations
+    def add_evaluation(self, checkpoint: str, shift: str, *, episodes: int, successes: int, seed: int,
+                       split: str = "test", ci: tuple[float, float] | None = None,
+                       extra: Mapping[str, Any] | None = None) -> EvaluationEntry:
+        """Record ``successes`` out of ``episodes`` for a checkpoint on ``shift`` (a shift spec name).
+
+        ``ci`` is the 95% interval (default: Wilson); ``extra`` any JSON
+        detail (eval config, env version, code version).  Re-recording the
+        same (checkpoint, shift, split, seed, episodes) with the same result
+        is a no-op; with a different result it is refused.
+        """
+        entry = self.checkpoint(checkpoint)
+        if not isinstance(shift, str) or not shift:
+            raise ConfigError(f"evaluation shift {shift!r} must be a shift name such as 'base'")
+        if not isinstance(episodes, int) or episodes < 1:
+            raise ConfigError(f"evaluation episodes {episodes!r} must be an integer >= 1")
+        if not isinstance(successes, int) or not 0 <= successes <= episodes:
+            raise ConfigError(f"evaluation successes {successes!r} must be an integer in [0, {episodes}]")
+        lo, hi = ci if ci is not None else wilson_interval(successes, episodes)
+        if not 0.0 <= lo <= hi <= 1.0:
+            raise ConfigError(f"evaluation interval {ci!r} must satisfy 0 <= low <= high <= 1")
+        key = (entry.id, shift, split, int(seed), episodes)
+        with self.write() as c:
+            old = c.execute("SELECT * FROM evaluations WHERE checkpoint = ? AND shift = ? AND split = ? AND seed = ? "
+                            "AND episodes = ?", key).fetchone()
+            if old is None:
+                cur = c.execute("INSERT INTO evaluations (checkpoint, shift, split, episodes, successes, ci_low, "
+                                "ci_high, seed, extra, created) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                                (entry.id, shift, split, episodes, successes, float(lo), float(hi), int(seed),
+                                 dumps(dict(extra or {})), schema.utc_now()))
+                new_id = cur.lastrowid
+        if old is not None:
+            e = self._evaluation_row(old)
+            if e.successes != successes:
+                raise ConfigError(
+                    f"an evaluation of ckpt:{entry.ref} on {shift} ({split} objects, seed {seed}, {episodes} "
+                    f"episodes) is already recorded with {e.successes} successes; evaluate with another --seed")
+            return e
+        return self._evaluation_row(self.conn.execute("SELECT * FROM evaluations WHERE id = ?", (new_id,)).fetchone())
+
+    def evaluations(self, checkpoint: str | None = None, shift: str | None = None) -> list[EvaluationEntry]:
+        q, a = "SELECT * FROM evaluations WHERE 1 = 1", []
+        if checkpoint is not None:
+            q += " AND checkpoint = ?"
+            a.append(checkpoint)
+        if shift is not None:
+            q += " AND shift = ?"
+            a.append(shift)
+        return [self._evaluation_row(r) for r in self.conn.execute(q + " ORDER BY id", a)]
+
+    @staticmethod
+    def _evaluation_row(r: tuple) -> EvaluationEntry:
+        eid, ckpt, shift, split, episodes, successes, lo, hi, seed, extra, created = r
+        return EvaluationEntry(eid, ckpt, shift, split, episodes, successes, lo, hi, seed, created, json.loads(extra))
+
+    # ----------------------------------------------------------------- tags
+    def tag(self, tag: str, checkpoint: str) -> CheckpointEntry:
+        """Point ``tag`` at a checkpoint (moving it if it exists); ``ckpt:TAG`` then resolves to it."""
+        check_name("tag", tag)
+        if tag in RESERVED or tag.isdigit():
+            raise ConfigError(f"tag {tag!r} would read as a selector (@best, @latest, @STEP); pick another name")
+        if self.conn.execute("SELECT 1 FROM checkpoints WHERE name = ?", (tag,)).fetchone():
+            raise ConfigError(f"tag {tag!r} is also a checkpoint name, and ckpt:{tag} means that name; pick another")
+        entry = self.checkpoint(checkpoint)
+        with self.write() as c:
+            c.execute("INSERT INTO tags (tag, checkpoint, created) VALUES (?, ?, ?)", (tag, entry.id, schema.utc_now()))
+        return entry
+
+    def untag(self, tag: str) -> None:
+        if tag not in self.tags():
+            raise unknown("tag", tag, self.tags(), "list tags with `nsl catalog ls tags`")
+        with self.write() as c:
+            c.execute("INSERT INTO tags (tag, checkpoint, created) VALUES (?, NULL, ?)", (tag, schema.utc_now()))
+
+    def tags(self, checkpoint: str | None = None) -> dict[str, str]:
+        """``{tag: checkpoint id}`` for current tags (optionally only those on one checkpoint)."""
+        rows = self.conn.execute("SELECT t.tag, t.checkpoint FROM tags t WHERE t.seq = "
+                                 "(SELECT MAX(seq) FROM tags u WHERE u.tag = t.tag) ORDER BY t.tag")
+        return {t: c for t, c in rows if c is not None and (checkpoint is None or c == checkpoint)}
+
+    def card_path(self, checkpoint: str) -> Path:
+        return Path(self.checkpoint(checkpoint).path) / CARD_FILE

@@ -1,0 +1,95 @@
+"""Feature statistics in LeRobot's shape: ``min``, ``max``, ``mean``, ``std``, ``count``.
+
+Per episode they are computed from the raw arrays when the episode is written
+and stored as ``stats/<feature>/<stat>`` columns of ``meta/episodes`` (as LeRobot
+does); ``meta/stats.json`` pools them exactly (counts, means and variances
+combine without loss), so appending episodes never re-reads old images.
+
+Conventions (LeRobot's): images are scaled to [0, 1] and reduced per channel
+to shape (3, 1, 1); vectors keep their dimension; scalar features have shape
+(1,); ``std`` is the population standard deviation; bool features keep bool
+``min``/``max``.  We do not compute LeRobot's optional quantiles (q01..q99).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+
+STAT_NAMES = ("min", "max", "mean", "std", "count")
+
+Stats = dict[str, dict[str, np.ndarray]]
+
+
+def feature_stats(values: np.ndarray, is_image: bool = False) -> dict[str, np.ndarray]:
+    """Stats of one feature over the first axis (frames)."""
+    values = np.asarray(values)
+    n = len(values)
+    if n == 0:
+        raise ValueError("cannot compute stats of an empty feature")
+    if is_image:  # (T, H, W, C) uint8 -> per channel, in [0, 1], shape (C, 1, 1)
+        flat = values.reshape(-1, values.shape[-1])
+        as_float = flat.astype(np.float64)
+        mean = as_float.mean(0)
+        std = np.sqrt(np.maximum((as_float ** 2).mean(0) - mean ** 2, 0.0))
+        shape = (-1, 1, 1)
+        return {"min": (flat.min(0) / 255.0).reshape(shape), "max": (flat.max(0) / 255.0).reshape(shape),
+                "mean": (mean / 255.0).reshape(shape), "std": (std / 255.0).reshape(shape),
+                "count": np.array([n])}
+    flat = values.reshape(n, -1)
+    as_float = flat.astype(np.float64)
+    return {"min": flat.min(0), "max": flat.max(0), "mean": as_float.mean(0), "std": as_float.std(0),
+            "count": np.array([n])}
+
+
+def episode_stats(frames: dict[str, np.ndarray], image_keys: Iterable[str]) -> Stats:
+    """Stats of every feature of one episode (``frames`` maps key -> (T, ...) array)."""
+    image_keys = set(image_keys)
+    return {k: feature_stats(v, k in image_keys) for k, v in frames.items()}
+
+
+def aggregate(parts: list[Stats]) -> Stats:
+    """Pool per-episode stats exactly: counts add, means and variances combine."""
+    if not parts:
+        raise ValueError("no stats to aggregate")
+    out: Stats = {}
+    for key in parts[0]:
+        counts = np.array([float(p[key]["count"][0]) for p in parts])
+        means = np.stack([np.asarray(p[key]["mean"], dtype=np.float64) for p in parts])
+        stds = np.stack([np.asarray(p[key]["std"], dtype=np.float64) for p in parts])
+        w = counts.reshape((-1,) + (1,) * (means.ndim - 1))
+        total = counts.sum()
+        mean = (w * means).sum(0) / total
+        var = (w * (stds ** 2 + (means - mean) ** 2)).sum(0) / total
+        mins = np.stack([np.asarray(p[key]["min"]) for p in parts])
+        maxs = np.stack([np.asarray(p[key]["max"]) for p in parts])
+        out[key] = {"min": mins.min(0), "max": maxs.max(0), "mean": mean, "std": np.sqrt(np.maximum(var, 0.0)),
+                    "count": np.array([int(total)])}
+    return out
+
+
+def to_json(stats: Stats) -> dict[str, dict[str, Any]]:
+    """JSON-ready nested lists (the content of ``meta/stats.json``)."""
+    return {k: {s: np.asarray(v[s]).tolist() for s in STAT_NAMES} for k, v in stats.items()}
+
+
+def from_json(d: dict[str, dict[str, Any]]) -> Stats:
+    return {k: {s: np.asarray(v[s]) for s in STAT_NAMES} for k, v in d.items()}
+
+
+def to_columns(stats: Stats) -> dict[str, Any]:
+    """Flatten to ``stats/<feature>/<stat>`` values (one row of ``meta/episodes``)."""
+    return {f"stats/{k}/{s}": np.asarray(v[s]).tolist() for k, v in stats.items() for s in STAT_NAMES}
+
+
+def from_columns(row: dict[str, Any]) -> Stats:
+    """Inverse of :func:`to_columns` for one episode row."""
+    out: Stats = {}
+    for col, value in row.items():
+        if not col.startswith("stats/"):
+            continue
+        key, _, stat = col[len("stats/"):].rpartition("/")
+        out.setdefault(key, {})[stat] = np.asarray(value)
+    return out

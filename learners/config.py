@@ -1,0 +1,166 @@
+"""The learner's settings: the network architecture, CEM, and a training run.
+
+Three plain dataclasses, each checked in ``__post_init__`` and saved as JSON in
+every checkpoint's ``config.json``:
+
+* :class:`NetConfig` is the architecture (what the weights mean).  A
+  checkpoint's weights are refused if their shapes do not match it.
+* :class:`CemConfig` is the action search, used for Bellman targets during
+  training and for acting.
+* :class:`TrainConfig` is one run: optimisation, stabilisers, augmentation,
+  schedule and seed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+from nsl.errors import ConfigError
+
+ACTION_DIM = 6  # (dx, dy, dz, dyaw, close, terminate), as in nsl.keys.ACTION_NAMES
+STATE_DIM = 2  # (gripper opening, wrist height)
+
+METHODS = ("scratch", "ft", "new_head", "pnn", "ft_pnn")
+FINE_TUNE_LR_FACTOR = 0.25  # fine-tuning learning rate = 25% of the parent's (the study's recipe)
+
+
+def _tuple(v: Any) -> tuple:
+    return tuple(v) if isinstance(v, (list, tuple)) else v
+
+
+@dataclass(frozen=True)
+class NetConfig:
+    """Architecture of one Q-network column: Q(image, state, action) -> P(success)."""
+
+    image_size: int = 64  # square input images (pixels)
+    conv_channels: tuple[int, ...] = (32, 32, 64, 64)  # one conv layer each
+    conv_strides: tuple[int, ...] = (2, 2, 2, 1)  # stride of each conv layer (kernel 3, padding 1)
+    coord_channels: bool = True  # append x/y coordinate planes to the image (CoordConv)
+    hidden: int = 128  # width of the merged state-action layers
+    head_layers: int = 2  # hidden layers evaluated once per candidate action
+    action_dims: tuple[int, ...] = (0, 1, 3, 5)  # action components the network reads and CEM searches
+    default_action: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, -1.0, -1.0)  # values of the other components
+    columns: int = 1  # progressive-network columns; 1 is a plain network, k > 1 freezes the first k-1
+
+    def __post_init__(self) -> None:
+        for name in ("conv_channels", "conv_strides", "action_dims", "default_action"):
+            object.__setattr__(self, name, _tuple(getattr(self, name)))
+        if not isinstance(self.image_size, int) or not 16 <= self.image_size <= 256:
+            raise ConfigError(f"net.image_size {self.image_size!r} is out of range; use 16..256 (64 is standard)")
+        if not self.conv_channels or len(self.conv_channels) != len(self.conv_strides):
+            raise ConfigError(f"net.conv_channels {self.conv_channels} and net.conv_strides {self.conv_strides} "
+                              "must be non-empty and of equal length (one entry per conv layer)")
+        if any(c < 1 for c in self.conv_channels) or any(s not in (1, 2) for s in self.conv_strides):
+            raise ConfigError(f"net.conv_channels {self.conv_channels} must be positive and "
+                              f"net.conv_strides {self.conv_strides} each 1 or 2")
+        if self.hidden < 1 or self.head_layers < 1:
+            raise ConfigError(f"net.hidden {self.hidden} and net.head_layers {self.head_layers} must be at least 1")
+        dims = self.action_dims
+        if not dims or len(set(dims)) != len(dims) or any(not 0 <= d < ACTION_DIM for d in dims) or list(dims) != sorted(dims):
+            raise ConfigError(f"net.action_dims {dims} must be distinct increasing indices in 0..{ACTION_DIM - 1} "
+                              "(0 dx, 1 dy, 2 dz, 3 dyaw, 4 close, 5 terminate)")
+        if len(self.default_action) != ACTION_DIM or any(not -1.0 <= v <= 1.0 for v in self.default_action):
+            raise ConfigError(f"net.default_action {self.default_action} must hold {ACTION_DIM} values in [-1, 1]")
+        if self.columns < 1:
+            raise ConfigError(f"net.columns {self.columns} must be at least 1")
+
+    @property
+    def feature_size(self) -> int:
+        """Side length of the trunk's output feature map."""
+        n = self.image_size
+        for s in self.conv_strides:
+            n = (n + 1) // s if s == 2 else n
+        return n
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> NetConfig:
+        return cls(**_known(cls, d, "architecture"))
+
+
+@dataclass(frozen=True)
+class CemConfig:
+    """Cross-entropy method over the active action components (QT-Opt's defaults)."""
+
+    samples: int = 64  # candidate actions per iteration
+    elites: int = 6  # best candidates that refit the Gaussian
+    iterations: int = 2
+    init_std: float = 1.0  # standard deviation of the first Gaussian (mean 0), before clipping to [-1, 1]
+    min_std: float = 0.05  # floor on the refitted standard deviation
+
+    def __post_init__(self) -> None:
+        if self.samples < 1 or self.iterations < 1:
+            raise ConfigError(f"cem samples {self.samples} and iterations {self.iterations} must be at least 1")
+        if not 1 <= self.elites <= self.samples:
+            raise ConfigError(f"cem elites {self.elites} must be in 1..samples ({self.samples})")
+        if self.init_std <= 0 or self.min_std < 0:
+            raise ConfigError(f"cem init_std {self.init_std} must be positive and min_std {self.min_std} non-negative")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> CemConfig:
+        return cls(**_known(cls, d, "cem"))
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One offline QT-Opt run (pre-training or fine-tuning)."""
+
+    steps: int = 20_000  # gradient steps (the run's total, also after a resume)
+    batch_size: int = 64
+    lr: float | None = None  # None: 3e-4 from scratch, 25% of the parent's learning rate when fine-tuning
+    weight_decay: float = 0.0
+    grad_clip: float = 10.0  # max gradient norm; 0 disables clipping
+    gamma: float = 0.9  # discount
+    polyak: float = 0.995  # target network 1: theta_bar <- polyak * theta_bar + (1 - polyak) * theta, every step
+    lag_period: int = 1000  # target network 2: a copy of the online network, refreshed every lag_period steps
+    cem: CemConfig = field(default_factory=CemConfig)  # action maximisation for the Bellman target
+    augment_crop: int = 4  # random-shift augmentation: pad by this many pixels and crop back; 0 disables
+    augment_colour: float = 0.1  # colour jitter strength (brightness, contrast, per-channel gain); 0 disables
+    seed: int = 0
+    log_every: int = 100  # steps between metric rows (CSV and TensorBoard)
+    checkpoint_every: int = 2000  # steps between checkpoints (a killed run resumes from the last one)
+    eval_every: int = 0  # steps between eval_fn calls; 0 disables
+    keep_trainer_state: int = 1  # how many of the newest checkpoints keep their trainer state (resume data)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.cem, dict):
+            object.__setattr__(self, "cem", CemConfig.from_dict(self.cem))
+        if self.steps < 0 or self.batch_size < 1:
+            raise ConfigError(f"steps {self.steps} must be >= 0 and batch_size {self.batch_size} >= 1")
+        if self.lr is not None and not 0 < self.lr < 1:
+            raise ConfigError(f"learning rate {self.lr} is out of range; use e.g. 3e-4 (or leave it unset)")
+        if not 0 <= self.gamma <= 1 or not 0 <= self.polyak < 1:
+            raise ConfigError(f"gamma {self.gamma} must be in [0, 1] and polyak {self.polyak} in [0, 1)")
+        if self.lag_period < 1 or self.log_every < 1 or self.checkpoint_every < 1 or self.eval_every < 0:
+            raise ConfigError("lag_period, log_every and checkpoint_every must be >= 1 and eval_every >= 0 "
+                              f"(got {self.lag_period}, {self.log_every}, {self.checkpoint_every}, {self.eval_every})")
+        if self.augment_crop < 0 or self.augment_colour < 0 or self.grad_clip < 0 or self.weight_decay < 0:
+            raise ConfigError("augment_crop, augment_colour, grad_clip and weight_decay must be non-negative")
+        if self.keep_trainer_state < 1:
+            raise ConfigError(f"keep_trainer_state {self.keep_trainer_state} must be at least 1 (resume needs one)")
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["cem"] = self.cem.to_dict()
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
+        return cls(**_known(cls, d, "training"))
+
+    def replace(self, **changes: Any) -> TrainConfig:
+        return type(self)(**{**{f.name: getattr(self, f.name) for f in fields(self)}, **changes})
+
+
+def _known(cls: type, d: dict[str, Any], what: str) -> dict[str, Any]:
+    names = {f.name for f in fields(cls)}
+    unknown = sorted(set(d) - names)
+    if unknown:
+        raise ConfigError(f"{what} config has unknown field(s) {unknown}; known fields: {sorted(names)}")
+    return {k: _tuple(v) for k, v in d.items()}

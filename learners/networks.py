@@ -1,0 +1,188 @@
+"""The Q-network: Q(image, gripper state, action) -> logit of P(grasp success).
+
+Each column is a conv trunk over the image (plus coordinate planes), whose
+flattened features and the gripper state form a per-state context vector; a
+candidate action's embedding is added to that context and a small MLP (the
+per-candidate head) maps it to one logit::
+
+    ctx  = W_s [flatten(trunk(image)), state] + b_s           once per state
+    h_1  = relu(ctx + W_a action)                             once per candidate
+    h_j  = relu(W_j h_{j-1}),  logit = w_out . h_last
+
+So maximising over many candidate actions (CEM) runs the trunk once per state
+and only the cheap head once per candidate: ``encode`` then ``score``.
+
+A :class:`QNetwork` holds one or more columns.  With one column it is a plain
+network.  With k > 1 it is a Progressive Neural Network (Rusu et al. 2016):
+columns 0..k-2 are frozen, and every layer of column k-1 after the first
+conv also reads the matching activations of the earlier columns through
+lateral connections.  The output is the last column's; the earlier columns
+compute exactly what they computed before.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import torch
+from torch import nn
+
+from .config import STATE_DIM, NetConfig
+
+HEAD_PREFIXES = ("state_fc", "action_fc", "hidden_fcs", "out", "lateral.state", "lateral.hidden", "lateral.out")
+
+
+class QColumn(nn.Module):
+    """One column: conv trunk, per-state context, per-candidate head, and laterals from ``n_lateral`` earlier columns."""
+
+    def __init__(self, cfg: NetConfig, n_lateral: int = 0):
+        super().__init__()
+        self.n_lateral = n_lateral
+        c_in = 3 + (2 if cfg.coord_channels else 0)
+        self.convs = nn.ModuleList()
+        lateral: dict[str, nn.ModuleList] = {}
+        for i, (c, s) in enumerate(zip(cfg.conv_channels, cfg.conv_strides)):
+            self.convs.append(nn.Conv2d(c_in, c, 3, s, 1))
+            if i > 0 and n_lateral:
+                lateral[f"conv{i}"] = nn.ModuleList(nn.Conv2d(c_in, c, 3, s, 1, bias=False) for _ in range(n_lateral))
+            c_in = c
+        flat = c_in * cfg.feature_size ** 2
+        h = cfg.hidden
+        self.state_fc = nn.Linear(flat + STATE_DIM, h)
+        self.action_fc = nn.Linear(len(cfg.action_dims), h, bias=False)
+        self.hidden_fcs = nn.ModuleList(nn.Linear(h, h) for _ in range(cfg.head_layers - 1))
+        self.out = nn.Linear(h, 1)
+        if n_lateral:
+            lateral["state"] = nn.ModuleList(nn.Linear(flat, h, bias=False) for _ in range(n_lateral))
+            for j in range(cfg.head_layers - 1):
+                lateral[f"hidden{j}"] = nn.ModuleList(nn.Linear(h, h, bias=False) for _ in range(n_lateral))
+            lateral["out"] = nn.ModuleList(nn.Linear(h, 1, bias=False) for _ in range(n_lateral))
+        self.lateral = nn.ModuleDict(lateral)
+
+    def _lat(self, name: str, inputs: list[torch.Tensor]) -> torch.Tensor | int:
+        if not self.n_lateral:
+            return 0
+        return sum(m(x) for m, x in zip(self.lateral[name], inputs))
+
+    def encode(self, x: torch.Tensor, state: torch.Tensor, prev: list[dict]) -> dict:
+        """Per-state activations: ``convs`` (list), ``flat`` and the context ``ctx`` (B, hidden)."""
+        acts = []
+        for i, conv in enumerate(self.convs):
+            y = conv(x)
+            if i > 0 and self.n_lateral:
+                y = y + self._lat(f"conv{i}", [p["convs"][i - 1] for p in prev])
+            x = torch.relu(y)
+            acts.append(x)
+        flat = x.flatten(1)
+        ctx = self.state_fc(torch.cat([flat, state], 1)) + self._lat("state", [p["flat"] for p in prev])
+        return {"convs": acts, "flat": flat, "ctx": ctx}
+
+    def score(self, cache: dict, actions: torch.Tensor, prev: list[list[torch.Tensor]]) -> tuple[torch.Tensor, list]:
+        """Logits (B, N) for candidate ``actions`` (B, N, A), plus the head activations for later columns."""
+        h = torch.relu(cache["ctx"].unsqueeze(1) + self.action_fc(actions))
+        acts = [h]
+        for j, fc in enumerate(self.hidden_fcs):
+            h = torch.relu(fc(h) + self._lat(f"hidden{j}", [p[j] for p in prev]))
+            acts.append(h)
+        logit = self.out(h) + self._lat("out", [p[-1] for p in prev])
+        return logit.squeeze(-1), acts
+
+
+class QNetwork(nn.Module):
+    """Q(image, state, action) as logits; one column, or a progressive network of several."""
+
+    def __init__(self, cfg: NetConfig):
+        super().__init__()
+        self.cfg = cfg
+        self.columns = nn.ModuleList(QColumn(cfg, n_lateral=k) for k in range(cfg.columns))
+        for col in self.columns[:-1]:
+            col.requires_grad_(False)
+        n = cfg.image_size
+        if cfg.coord_channels:
+            ramp = torch.linspace(-1.0, 1.0, n)
+            coords = torch.stack([ramp.view(1, n).expand(n, n), ramp.view(n, 1).expand(n, n)])
+            self.register_buffer("coords", coords.unsqueeze(0), persistent=False)
+        else:
+            self.coords = None
+
+    def _input(self, image: torch.Tensor) -> torch.Tensor:
+        x = image - 0.5
+        if self.coords is not None:
+            x = torch.cat([x, self.coords.expand(x.shape[0], -1, -1, -1)], 1)
+        return x
+
+    def encode(self, image: torch.Tensor, state: torch.Tensor) -> list[dict]:
+        """Per-state context for :meth:`score`; ``image`` is float (B, 3, H, W) in [0, 1]."""
+        x = self._input(image)
+        caches: list[dict] = []
+        for col in self.columns:
+            caches.append(col.encode(x, state, caches))
+        return caches
+
+    def score(self, caches: list[dict], actions: torch.Tensor) -> torch.Tensor:
+        """Logits (B, N) of candidate ``actions`` (B, N, A) given the context of B states."""
+        heads: list[list[torch.Tensor]] = []
+        logit = None
+        for col, cache in zip(self.columns, caches):
+            logit, acts = col.score(cache, actions, heads)
+            heads.append(acts)
+        return logit
+
+    def forward(self, image: torch.Tensor, state: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """Logits (B,) of one action (B, A) per state."""
+        return self.score(self.encode(image, state), action.unsqueeze(1)).squeeze(1)
+
+    def trainable_parameters(self) -> list[nn.Parameter]:
+        return [p for p in self.parameters() if p.requires_grad]
+
+
+def is_head_parameter(name: str) -> bool:
+    """True for a parameter of a column's head (everything after the conv trunk)."""
+    rest = name.split(".", 2)[2] if name.startswith("columns.") else name
+    return rest.startswith(HEAD_PREFIXES)
+
+
+def reinit_head(net: QNetwork) -> None:
+    """Re-initialise the last column's head (``new_head``); the trunk keeps its weights."""
+    col = net.columns[-1]
+    mods = [col.state_fc, col.action_fc, *col.hidden_fcs, col.out]
+    for name, lat in col.lateral.items():
+        if not name.startswith("conv"):
+            mods.extend(lat)
+    for m in mods:
+        m.reset_parameters()
+
+
+def grow_column(parent: QNetwork, copy_last: bool) -> QNetwork:
+    """A progressive network: ``parent``'s columns, frozen, plus one new trainable column.
+
+    With ``copy_last`` (FT+PNN) the new column starts as a copy of the
+    parent's last column and its new lateral connections start at zero, so
+    the grown network computes exactly the parent's function; otherwise (PNN)
+    the new column and its laterals are freshly initialised.
+    """
+    cfg = NetConfig.from_dict({**parent.cfg.to_dict(), "columns": parent.cfg.columns + 1})
+    net = QNetwork(cfg)
+    with torch.no_grad():
+        for old, new in zip(parent.columns, net.columns):
+            new.load_state_dict(old.state_dict())
+        if copy_last:
+            new_col, src = net.columns[-1], parent.columns[-1]
+            own = src.state_dict()
+            for name, t in new_col.state_dict().items():
+                if name in own:
+                    t.copy_(own[name])
+                elif name.startswith("lateral."):
+                    t.zero_()
+                else:
+                    raise AssertionError(f"FT+PNN: no source for parameter {name}")
+    for col in net.columns[:-1]:
+        col.requires_grad_(False)
+    return net
+
+
+def clone_frozen(net: QNetwork) -> QNetwork:
+    """A copy of ``net`` for use as a target network (no gradients)."""
+    out = copy.deepcopy(net)
+    out.requires_grad_(False)
+    return out

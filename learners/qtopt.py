@@ -1,0 +1,126 @@
+"""Offline QT-Opt: the Bellman target and one gradient step.
+
+The online network is trained with log loss (binary cross-entropy on the
+logit) against the clipped double-Q target of QT-Opt::
+
+    a*     = argmax_a Q_polyak(s', a)                       (CEM)
+    target = r + gamma * (1 - done) * min(Q_polyak(s', a*), Q_lagged(s', a*))
+
+``Q_polyak`` is a Polyak average of the online weights (updated every step)
+and ``Q_lagged`` a copy of the online weights refreshed every
+``lag_period`` steps.  Q values are probabilities of success (sigmoids), so a
+target is in [0, 1] for rewards in {0, 1} and gamma <= 1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+
+from nsl import keys
+
+from .augment import prepare_images
+from .cem import active_actions, cem_maximize, noise_from_generator
+from .config import CemConfig, TrainConfig
+from .networks import QNetwork, clone_frozen
+
+
+@dataclass
+class Learner:
+    """Everything a gradient step changes: the networks, the optimiser and the step's random generator."""
+
+    online: QNetwork
+    polyak: QNetwork
+    lagged: QNetwork
+    optimizer: torch.optim.Optimizer
+    generator: torch.Generator  # augmentation and CEM noise
+    lr: float
+
+    @classmethod
+    def create(cls, net: QNetwork, lr: float, cfg: TrainConfig) -> Learner:
+        opt = torch.optim.Adam(net.trainable_parameters(), lr=lr, weight_decay=cfg.weight_decay)
+        gen = torch.Generator().manual_seed(cfg.seed)
+        return cls(net, clone_frozen(net), clone_frozen(net), opt, gen, lr)
+
+    def state_dict(self) -> dict:
+        return {"online": self.online.state_dict(), "polyak": self.polyak.state_dict(),
+                "lagged": self.lagged.state_dict(), "optimizer": self.optimizer.state_dict(),
+                "generator": self.generator.get_state()}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.online.load_state_dict(state["online"])
+        self.polyak.load_state_dict(state["polyak"])
+        self.lagged.load_state_dict(state["lagged"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.generator.set_state(state["generator"])
+
+
+def bellman_target(polyak: QNetwork, lagged: QNetwork, next_image: torch.Tensor, next_state: torch.Tensor,
+                   reward: torch.Tensor, done: torch.Tensor, gamma: float, cem: CemConfig,
+                   noise: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Clipped double-Q targets (B,) and the next-state values (B,) (0 where ``done``).
+
+    Terminal transitions need no next-state value, so CEM runs only on the
+    others (``noise`` is drawn for the whole batch, keeping the draw fixed).
+    """
+    value = torch.zeros_like(reward)
+    live = (done < 0.5).nonzero().squeeze(1)
+    if len(live):
+        img, st = next_image[live], next_state[live]
+        ctx = polyak.encode(img, st)
+        best, logit_polyak = cem_maximize(lambda cand: polyak.score(ctx, cand), noise[live], cem)
+        logit_lagged = lagged(img, st, best)
+        value[live] = torch.sigmoid(torch.minimum(logit_polyak, logit_lagged))
+    return reward + gamma * (1.0 - done) * value, value
+
+
+@torch.no_grad()
+def polyak_update(target: QNetwork, online: QNetwork, polyak: float) -> None:
+    """target <- polyak * target + (1 - polyak) * online, for the trainable parameters."""
+    pairs = [(t, o) for t, o in zip(target.parameters(), online.parameters()) if o.requires_grad]
+    torch._foreach_lerp_([t for t, _ in pairs], [o for _, o in pairs], 1.0 - polyak)
+
+
+def update(learner: Learner, batch: dict[str, torch.Tensor], cfg: TrainConfig, step: int) -> dict[str, float]:
+    """One QT-Opt gradient step on ``batch`` (tensors keyed by ``nsl.keys``); returns metrics."""
+    net, gen = learner.online, learner.generator
+    image = prepare_images(batch[keys.OBS_IMAGE], cfg.augment_crop, cfg.augment_colour, gen)
+    next_image = prepare_images(batch[keys.NEXT_OBS_IMAGE], cfg.augment_crop, cfg.augment_colour, gen)
+    action = active_actions(batch[keys.ACTION], net.cfg)
+    reward, done = batch[keys.REWARD], batch[keys.DONE]
+    noise = noise_from_generator(len(reward), action.shape[1], cfg.cem, gen)
+
+    with torch.no_grad():
+        target, next_value = bellman_target(learner.polyak, learner.lagged, next_image, batch[keys.NEXT_OBS_STATE],
+                                            reward, done, cfg.gamma, cfg.cem, noise)
+
+    logits = net(image, batch[keys.OBS_STATE], action)
+    loss = F.binary_cross_entropy_with_logits(logits, target)
+    learner.optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    params = net.trainable_parameters()
+    grad_norm = torch.nn.utils.clip_grad_norm_(params, cfg.grad_clip if cfg.grad_clip > 0 else float("inf"))
+    learner.optimizer.step()
+
+    polyak_update(learner.polyak, net, cfg.polyak)
+    if (step + 1) % cfg.lag_period == 0:
+        learner.lagged.load_state_dict(net.state_dict())
+
+    q = torch.sigmoid(logits.detach())
+    live = done < 0.5
+    stats = torch.stack([
+        loss.detach(), grad_norm, q.mean(), q.min(), q.max(), target.mean(),
+        next_value[live].mean() if live.any() else next_value.new_tensor(0.0),
+    ]).tolist()
+    names = ["losses/q_loss", "losses/grad_norm", "q/mean", "q/min", "q/max", "q/target_mean", "q/next_value_mean"]
+    return dict(zip(names, stats))
+
+
+def batch_to_torch(batch: dict) -> dict[str, torch.Tensor]:
+    """numpy arrays from a sampler -> tensors (no copy), rewards and done flags as float32."""
+    out = {k: torch.from_numpy(v) for k, v in batch.items()}
+    for k in (keys.REWARD, keys.DONE):
+        out[k] = out[k].float()
+    return out

@@ -1,0 +1,152 @@
+"""The transition-sampler contract the learner trains from, and two in-memory samplers.
+
+A sampler is any object with::
+
+    sample(batch_size: int, rng: numpy.random.Generator) -> dict[str, np.ndarray]
+    describe() -> dict          # data versions and weights, recorded in checkpoints
+
+``sample`` returns a batch keyed by ``nsl.keys``: ``OBS_IMAGE`` (B, H, W, 3)
+uint8, ``OBS_STATE`` (B, 2) float32, ``ACTION`` (B, 6) float32, ``REWARD``
+(B,) float32, ``DONE`` (B,) float32, ``NEXT_OBS_IMAGE`` and
+``NEXT_OBS_STATE``.  All randomness comes from ``rng`` (owned, saved and
+restored by the trainer), so a sampler holds no random state of its own.
+
+The dataset loader (``nsl.datasets.api``) provides samplers over stored
+datasets; :class:`ArraySampler` wraps numpy arrays (tests, scratch
+experiments) and :class:`MixtureSampler` mixes samplers by weight.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any, Protocol
+
+import numpy as np
+
+from nsl import keys
+from nsl.errors import ConfigError
+
+BATCH_KEYS = (keys.OBS_IMAGE, keys.OBS_STATE, keys.ACTION, keys.REWARD, keys.DONE,
+              keys.NEXT_OBS_IMAGE, keys.NEXT_OBS_STATE)
+
+
+class Sampler(Protocol):
+    def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]: ...
+
+    def describe(self) -> dict[str, Any]: ...
+
+
+class ArraySampler:
+    """Uniform transitions from in-memory arrays; the next observation of transition i is frame ``next_index[i]``.
+
+    Frames are stored once: transition i's observation is frame i and its
+    next observation frame ``next_index[i]`` (any frame for a terminal
+    transition, whose next state is never used).
+    """
+
+    def __init__(self, images: np.ndarray, states: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
+                 dones: np.ndarray, next_index: np.ndarray, name: str = "arrays", valid: np.ndarray | None = None):
+        n = len(images)
+        if images.ndim != 4 or images.shape[3] != 3 or images.dtype != np.uint8:
+            raise ConfigError(f"images must be uint8 (N, H, W, 3); got {images.dtype} {images.shape}")
+        for label, arr, shape in (("states", states, (n, 2)), ("actions", actions, (n, 6)), ("rewards", rewards, (n,)),
+                                  ("dones", dones, (n,)), ("next_index", next_index, (n,))):
+            if arr.shape != shape:
+                raise ConfigError(f"{label} has shape {arr.shape}; expected {shape} to match {n} images")
+        if n == 0 or next_index.min() < 0 or next_index.max() >= n:
+            raise ConfigError(f"next_index must index the {n} frames (and there must be at least one)")
+        self.images = images
+        self.states = states.astype(np.float32, copy=False)
+        self.actions = actions.astype(np.float32, copy=False)
+        self.rewards = rewards.astype(np.float32, copy=False)
+        self.dones = dones.astype(np.float32, copy=False)
+        self.next_index = next_index.astype(np.int64, copy=False)
+        self.indices = np.arange(n) if valid is None else np.flatnonzero(valid)
+        if len(self.indices) == 0:
+            raise ConfigError("the sampler has no usable transitions")
+        self.name = name
+
+    @classmethod
+    def from_transitions(cls, batch: dict[str, np.ndarray], name: str = "arrays") -> ArraySampler:
+        """From explicit transition arrays keyed by ``nsl.keys`` (next observations stored separately)."""
+        missing = [k for k in BATCH_KEYS if k not in batch]
+        if missing:
+            raise ConfigError(f"transition arrays lack key(s) {missing}; need {list(BATCH_KEYS)}")
+        n = len(batch[keys.OBS_IMAGE])
+        return cls(np.concatenate([batch[keys.OBS_IMAGE], batch[keys.NEXT_OBS_IMAGE]]),
+                   np.concatenate([batch[keys.OBS_STATE], batch[keys.NEXT_OBS_STATE]]),
+                   np.concatenate([batch[keys.ACTION], np.zeros_like(batch[keys.ACTION])]),
+                   np.concatenate([batch[keys.REWARD], np.zeros_like(batch[keys.REWARD])]),
+                   np.concatenate([batch[keys.DONE], np.ones_like(batch[keys.DONE])]),
+                   np.concatenate([np.arange(n) + n, np.arange(n) + n]),
+                   name=name, valid=np.arange(2 * n) < n)
+
+    @classmethod
+    def from_episodes(cls, episodes: Iterable[Any], name: str = "episodes") -> ArraySampler:
+        """From episode records with ``images``, ``states``, ``actions``, ``rewards`` and ``terminated``
+        (e.g. ``nsl.collectors.Episode``).  A truncated episode's last transition has no next
+        observation, so it is left out."""
+        imgs, sts, acts, rews, dones, nxt, valid = [], [], [], [], [], [], []
+        start = 0
+        for ep in episodes:
+            t = len(ep.actions)
+            imgs.append(ep.images)
+            sts.append(ep.states)
+            acts.append(ep.actions)
+            rews.append(ep.rewards)
+            d = np.zeros(t, np.float32)
+            d[-1] = float(ep.terminated)
+            dones.append(d)
+            nxt.append(start + np.minimum(np.arange(1, t + 1), t - 1))
+            v = np.ones(t, bool)
+            v[-1] = bool(ep.terminated)
+            valid.append(v)
+            start += t
+        if not imgs:
+            raise ConfigError("no episodes given to ArraySampler.from_episodes")
+        return cls(np.concatenate(imgs), np.concatenate(sts), np.concatenate(acts), np.concatenate(rews),
+                   np.concatenate(dones), np.concatenate(nxt), name=name, valid=np.concatenate(valid))
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+        i = self.indices[rng.integers(0, len(self.indices), size=batch_size)]
+        j = self.next_index[i]
+        return {keys.OBS_IMAGE: self.images[i], keys.OBS_STATE: self.states[i], keys.ACTION: self.actions[i],
+                keys.REWARD: self.rewards[i], keys.DONE: self.dones[i],
+                keys.NEXT_OBS_IMAGE: self.images[j], keys.NEXT_OBS_STATE: self.states[j]}
+
+    def describe(self) -> dict[str, Any]:
+        rewarded = float(self.rewards[self.indices].sum())
+        return {"sources": [{"name": self.name, "kind": "arrays", "transitions": len(self.indices),
+                             "rewards": rewarded, "weight": 1.0}]}
+
+
+class MixtureSampler:
+    """Each batch drawn from several samplers in fixed proportions (e.g. base and target data 50/50)."""
+
+    def __init__(self, parts: Sequence[tuple[Sampler, float]]):
+        if not parts or any(w <= 0 for _, w in parts):
+            raise ConfigError(f"a mixture needs at least one sampler and positive weights; got {[w for _, w in parts]}")
+        total = float(sum(w for _, w in parts))
+        self.parts = [(s, w / total) for s, w in parts]
+
+    def counts(self, batch_size: int) -> list[int]:
+        """Samples per part: the weights' shares of the batch, rounded by largest remainder."""
+        exact = [w * batch_size for _, w in self.parts]
+        out = [int(x) for x in exact]
+        for k in sorted(range(len(exact)), key=lambda k: out[k] - exact[k])[: batch_size - sum(out)]:
+            out[k] += 1
+        return out
+
+    def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+        pieces = [s.sample(n, rng) for (s, _), n in zip(self.parts, self.counts(batch_size)) if n > 0]
+        return {k: np.concatenate([p[k] for p in pieces]) for k in BATCH_KEYS}
+
+    def describe(self) -> dict[str, Any]:
+        sources = []
+        for s, w in self.parts:
+            for src in s.describe().get("sources", []):
+                sources.append({**src, "weight": src.get("weight", 1.0) * w})
+        return {"sources": sources}
