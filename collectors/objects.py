@@ -9,6 +9,7 @@ that an object is graspable: its middle extent falls in a realistic range.
 from __future__ import annotations
 
 import functools
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,20 +48,29 @@ def urdf_root() -> Path:
     return root
 
 
+_VERTEX = re.compile(rb"^v\s+(\S+)\s+(\S+)\s+(\S+)", re.M)
+_TRIANGLE = re.compile(rb"^f\s+(-?\d+)\S*\s+(-?\d+)\S*\s+(-?\d+)\S*\s*$", re.M)
+
+
 def parse_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices and triangulated faces of a Wavefront OBJ file."""
-    verts: list[list[float]] = []
-    faces: list[list[int]] = []
-    with open(path) as f:
-        for line in f:
-            if line.startswith("v "):
-                verts.append([float(x) for x in line.split()[1:4]])
-            elif line.startswith("f "):
+    """Vertices and triangulated faces of a Wavefront OBJ file.
+
+    Triangle-only files (nearly all of random_urdfs) are parsed with two
+    regular expressions; files with polygons are fan-triangulated line by line.
+    """
+    data = Path(path).read_bytes()
+    v = np.array(_VERTEX.findall(data), dtype=np.float64).reshape(-1, 3)
+    tris = _TRIANGLE.findall(data)
+    if len(tris) == len(re.findall(rb"^f\s", data, re.M)):
+        fc = np.array(tris, dtype=np.int64).reshape(-1, 3)
+    else:
+        faces: list[list[int]] = []
+        for line in data.decode().splitlines():
+            if line.startswith("f "):
                 idx = [int(tok.split("/")[0]) for tok in line.split()[1:]]
-                idx = [i - 1 if i > 0 else len(verts) + i for i in idx]
                 faces.extend([idx[0], idx[k], idx[k + 1]] for k in range(1, len(idx) - 1))
-    v = np.asarray(verts, dtype=np.float64).reshape(-1, 3)
-    fc = np.asarray(faces, dtype=np.int32).reshape(-1, 3)
+        fc = np.array(faces, dtype=np.int64).reshape(-1, 3)
+    fc = np.where(fc > 0, fc - 1, len(v) + fc).astype(np.int32)  # 1-based, or negative = from the end
     return v, fc
 
 

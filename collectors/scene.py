@@ -36,6 +36,7 @@ START_Z = 0.25  # wrist height at the start of an episode
 WORKSPACE_HALF = 0.13  # wrist x/y limits
 TIMESTEP = 0.002
 CAMERA_NAME = "shoulder"
+MAX_OBJECTS = 5
 
 
 @dataclass(frozen=True)
@@ -115,6 +116,11 @@ def build_spec(objects: list[ObjectSpec], shift: ShiftSpec, image_size: int = 64
     _add_gripper(spec)
     for i, obj in enumerate(objects):
         _add_object(spec, i, obj)
+    for i in range(len(objects), MAX_OBJECTS):
+        # Unused mesh slots keep every scene's asset list the same shape, so the
+        # renderer can reuse one GPU context across episodes (no geom uses them).
+        spec.add_mesh(name=f"mesh{i}", uservert=[0, 0, 0, 0.01, 0, 0, 0, 0.01, 0, 0, 0, 0.01],
+                      userface=[0, 1, 2, 0, 1, 3, 0, 2, 3, 1, 2, 3])
     shift.apply(spec)
     return spec
 
@@ -173,7 +179,7 @@ def _add_gripper(spec: mujoco.MjSpec) -> None:
 def _add_object(spec: mujoco.MjSpec, i: int, obj: ObjectSpec) -> None:
     mesh = load_mesh(obj.mesh_id)
     spec.add_mesh(name=f"mesh{i}", uservert=(mesh.vertices * obj.scale).flatten().tolist(),
-                  userface=mesh.faces.flatten().tolist())
+                  userface=mesh.faces.flatten().tolist(), maxhullvert=32)
     body = spec.worldbody.add_body(name=f"object{i}", pos=list(obj.pos), quat=list(obj.quat))
     body.add_freejoint(name=f"object{i}_joint")
     body.add_geom(name=f"object{i}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"mesh{i}", rgba=list(obj.rgba),
