@@ -11,7 +11,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "eval", help="success rate of a policy on one or more shifts, with 95%% intervals",
         description="Evaluate a policy on test objects. Episode i uses scene seed (--seed, i) on every shift and "
                     "for every policy, so two policies evaluated with the same seed see identical scenes.")
-    p.add_argument("--policy", default="oracle", help="random | oracle[:NOISE] (default oracle)")
+    p.add_argument("--policy", default="oracle",
+                   help="comma-separated policies: random | oracle[:NOISE] (default oracle)")
     p.add_argument("--shift", default="base", help="comma-separated shift specs, or 'all' (default base)")
     p.add_argument("--severity", type=float, default=None, help="severity for shifts given without @X")
     p.add_argument("--episodes", type=int, default=100, help="episodes per shift (default 100)")
@@ -35,14 +36,19 @@ def run(args: argparse.Namespace) -> int:
     shifts = parse_shift_list(args.shift, args.severity)
     config = EvalConfig(episodes=args.episodes, split=args.split, seed=args.seed, workers=args.workers,
                         batch=args.batch)
-    make_policy = policy_factory(args.policy, EnvConfig())
-    results = evaluate(make_policy, shifts, config, progress=not args.json)
+    refs = [r.strip() for r in args.policy.split(",") if r.strip()]
+    factories = {ref: policy_factory(ref, EnvConfig()) for ref in refs}  # validate all before any work
+    table = {ref: evaluate(make, shifts, config, progress=not args.json) for ref, make in factories.items()}
     if args.json:
-        print(json.dumps({"policy": args.policy, "config": config.to_dict(),
-                          "results": {k: v.to_dict() for k, v in results.items()}}, sort_keys=True))
+        out = {"config": config.to_dict(), "policies": {
+            ref: {"results": {k: v.to_dict() for k, v in res.items()}} for ref, res in table.items()}}
+        if len(refs) == 1:
+            out = {"policy": refs[0], "config": config.to_dict(), **out["policies"][refs[0]]}
+        print(json.dumps(out, sort_keys=True))
     elif args.markdown:
-        print(markdown_table({args.policy: results}))
+        print(markdown_table(table))
     else:
-        for name, r in results.items():
-            print(f"{name:<24} {r}")
+        for ref, results in table.items():
+            for name, r in results.items():
+                print(f"{ref:<14} {name:<24} {r}")
     return 0
