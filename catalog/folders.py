@@ -2,9 +2,9 @@
 
 A checkpoint folder holds ``model.safetensors`` (the weights), ``config.json``
 (everything needed to rebuild the model) and a generated ``README.md`` model
-card.  The checkpoint id is a content hash of the first two files, so the
-same weights and config always get the same id and a changed byte anywhere
-gives a different one.  The card is derived from the catalog and may be
+card.  The checkpoint id is a content hash of the weights and the config, so
+the same weights and config always get the same id and a changed weight or
+setting gives a different one.  The card is derived from the catalog and may be
 regenerated (for example after new evaluations); it is not part of the id.
 
 Folders are written completely in a hidden temporary sibling
@@ -64,14 +64,34 @@ def hash_tree(root: Path) -> dict[str, str]:
     return out
 
 
-def checkpoint_id(files: Mapping[str, str]) -> str:
-    """The checkpoint id: sha256 over the digests of ``model.safetensors`` and ``config.json``."""
-    missing = [f for f in CONTENT_FILES if f not in files]
-    if missing:
-        raise CorruptDataError(f"checkpoint is missing {', '.join(missing)}; a checkpoint folder needs "
-                               f"{' and '.join(CONTENT_FILES)}")
-    text = "".join(f"{name} {files[name]}\n" for name in CONTENT_FILES)
-    return hashlib.sha256(text.encode()).hexdigest()
+def canonical_config(config: Mapping[str, Any]) -> bytes:
+    """Compact sorted JSON of ``config`` as it reads back from ``config.json`` (the form the id hashes)."""
+    return json.dumps(json.loads(encode_config(config)), sort_keys=True, separators=(",", ":")).encode()
+
+
+def checkpoint_id(weights: bytes | Path, config: Mapping[str, Any]) -> str:
+    """The checkpoint id: sha256 over the weights file bytes, a NUL byte and the canonical config.
+
+    The same definition as ``nsl.learners``' ``checkpoint_id(folder)``, so both
+    name a checkpoint alike; formatting-only edits of ``config.json`` keep the id
+    (``verify`` still reports them, as it compares whole-file digests).
+    """
+    h = hashlib.sha256()
+    if isinstance(weights, (bytes, bytearray, memoryview)):
+        h.update(weights)
+    else:
+        with open(weights, "rb") as f:
+            while chunk := f.read(_CHUNK):
+                h.update(chunk)
+    h.update(b"\0")
+    h.update(canonical_config(config))
+    return h.hexdigest()
+
+
+def folder_checkpoint_id(folder: Path) -> str:
+    """The id of the checkpoint stored in ``folder`` (see :func:`checkpoint_id`)."""
+    folder_digests(folder)  # clear error if a content file is missing
+    return checkpoint_id(Path(folder) / WEIGHTS_FILE, read_config(folder))
 
 
 def folder_digests(folder: Path) -> dict[str, str]:

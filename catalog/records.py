@@ -33,6 +33,11 @@ RESERVED = ("best", "latest")  # selectors that cannot be tag names
 SHORT_ID = 12  # hex digits shown for a checkpoint id
 
 
+def short_hash(h: str | None) -> str:
+    """The first 12 hex digits of a content hash, without an algorithm prefix such as ``sha256:``."""
+    return (h or "?").rpartition(":")[2][:SHORT_ID]
+
+
 def check_name(kind: str, name: str) -> str:
     """Validate a dataset, checkpoint or tag name; return it."""
     if not isinstance(name, str) or not NAME_RE.fullmatch(name):
@@ -89,7 +94,7 @@ class DatasetEntry:
 
 @dataclass(frozen=True)
 class CheckpointEntry:
-    id: str  # sha256 over model.safetensors and config.json (see folders.checkpoint_id)
+    id: str  # content hash of the weights and the config (see folders.checkpoint_id)
     name: str
     step: int
     parent: str | None  # id of the checkpoint training started from; None for training from scratch

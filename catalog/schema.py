@@ -50,7 +50,7 @@ def _v1(conn: sqlite3.Connection) -> None:
         );
         CREATE TABLE checkpoints (
             seq          INTEGER PRIMARY KEY AUTOINCREMENT,
-            id           TEXT NOT NULL UNIQUE,  -- sha256 over model.safetensors and config.json
+            id           TEXT NOT NULL UNIQUE,  -- content hash of the weights and the config
             name         TEXT NOT NULL,
             step         INTEGER NOT NULL,
             parent       TEXT,                  -- id of the checkpoint training started from

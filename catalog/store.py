@@ -25,6 +25,7 @@ Usage::
 from __future__ import annotations
 
 import functools
+import hashlib
 import json
 import sqlite3
 from collections.abc import Iterator, Mapping, Sequence
@@ -33,14 +34,17 @@ from pathlib import Path
 from typing import Any
 
 from nsl import workspace
-from nsl.errors import ConfigError, unknown
+from nsl.errors import ConfigError, UnknownReferenceError, unknown
 
 from . import schema
-from .card import render_model_card
-from .folders import CARD_FILE, checkpoint_id, folder_digests, hash_tree, read_config, write_card, write_model_folder
+from .render import render_model_card
+from .folders import (
+    CONFIG_FILE, WEIGHTS_FILE, checkpoint_id, encode_config, file_sha256, folder_checkpoint_id, folder_digests,
+    hash_tree, read_config, write_card, write_model_folder,
+)
 from .records import (
-    RESERVED, CheckpointEntry, DatasetEntry, DataUse, EvaluationEntry, ResolvedData, check_name, dumps,
-    parse_data_ref, wilson_interval,
+    CKPT_PREFIX, HEX_RE, RESERVED, CheckpointEntry, DatasetEntry, DataUse, EvaluationEntry, ResolvedData,
+    check_name, dumps, parse_checkpoint_ref, parse_data_ref, short_hash, wilson_interval,
 )
 
 
@@ -130,8 +134,8 @@ class Catalog:
             existing = self._dataset_row(old)
             if existing.hash != hash:
                 raise ConfigError(
-                    f"dataset {name}@v{version} is already registered with hash {existing.hash[:12]}, not "
-                    f"{hash[:12]}; catalog entries are append-only: write the new data as "
+                    f"dataset {name}@v{version} is already registered with hash {short_hash(existing.hash)}, not "
+                    f"{short_hash(hash)}; catalog entries are append-only: write the new data as "
                     f"{name}@v{self.next_dataset_version(name)}")
             return existing
         return self.dataset(name, version)
@@ -183,21 +187,23 @@ class Catalog:
         ``parent``: id of the checkpoint training started from (None: from
         scratch); ``data``: the datasets trained on with their batch weights;
         ``shift``: the shift it is trained for (default: the shift of the last
-        dataset in ``data``, else the parent's, else "base").
+        dataset in ``data``, else the parent's, else "base"); ``card_info``:
+        extra model-card fields (``summary``, ``tags``, ``license``); ``dest``:
+        the folder to write (default ``checkpoints/NAME/{STEP:08d}-{ID12}``).
+        Registering the same weights and config again returns the existing
+        entry.
         """
-        from .folders import CONFIG_FILE, WEIGHTS_FILE, encode_config  # noqa: F401  (same module family)
-        import hashlib
-
         check_name("checkpoint", name)
         config_bytes = encode_config(config)
-        wdigest = (hashlib.sha256(bytes(weights)).hexdigest() if isinstance(weights, (bytes, bytearray, memoryview))
-                   else None)
-        if wdigest is None:
-            from .folders import file_sha256
-
+        if isinstance(weights, (bytes, bytearray, memoryview)):
+            wdigest = hashlib.sha256(weights).hexdigest()
+        elif Path(weights).is_file():
             wdigest = file_sha256(Path(weights))
+        else:
+            raise ConfigError(f"weights file {weights} does not exist; pass safetensors bytes or an existing file")
         files = {WEIGHTS_FILE: wdigest, CONFIG_FILE: hashlib.sha256(config_bytes).hexdigest()}
-        entry = self._new_checkpoint(checkpoint_id(files), name, step, parent, data, shift, dict(config),
+        config = json.loads(config_bytes)  # as it will read back from config.json
+        entry = self._new_checkpoint(checkpoint_id(weights, config), name, step, parent, data, shift, config,
                                      code_version, Path("."), files)
         existing = self._checkpoint_or_none(entry.id)
         if existing is not None:
@@ -219,8 +225,8 @@ class Catalog:
         check_name("checkpoint", name)
         folder = Path(folder)
         files = folder_digests(folder)
-        entry = self._new_checkpoint(checkpoint_id(files), name, step, parent, data, shift, read_config(folder),
-                                     code_version, folder, files)
+        entry = self._new_checkpoint(folder_checkpoint_id(folder), name, step, parent, data, shift,
+                                     read_config(folder), code_version, folder, files)
         existing = self._checkpoint_or_none(entry.id)
         if existing is not None:
             self._check_same(existing, entry)
@@ -287,8 +293,6 @@ class Catalog:
 
     def checkpoint(self, ref: str) -> CheckpointEntry:
         """A checkpoint by id, id prefix or any ``ckpt:`` reference."""
-        from .refs import resolve_checkpoint
-
         return resolve_checkpoint(self, ref)
 
     def checkpoints(self, name: str | None = None) -> list[CheckpointEntry]:
@@ -297,9 +301,10 @@ class Catalog:
             "SELECT * FROM checkpoints ORDER BY seq", ())
         return [self._checkpoint_row(r) for r in self.conn.execute(q, a)]
 
-    def children(self, checkpoint_id: str) -> list[CheckpointEntry]:
+    def children(self, checkpoint: str) -> list[CheckpointEntry]:
+        """Checkpoints fine-tuned directly from the checkpoint with id ``checkpoint``."""
         return [self._checkpoint_row(r) for r in
-                self.conn.execute("SELECT * FROM checkpoints WHERE parent = ? ORDER BY seq", (checkpoint_id,))]
+                self.conn.execute("SELECT * FROM checkpoints WHERE parent = ? ORDER BY seq", (checkpoint,))]
 
     def trained_on(self, name: str, version: int) -> list[CheckpointEntry]:
         """Checkpoints whose training data included dataset ``name`` at ``version``."""
@@ -309,22 +314,26 @@ class Catalog:
 
     def lineage(self, ref: str) -> list[CheckpointEntry]:
         """The checkpoint and its ancestors, newest first (stops at a removed parent)."""
-        chain = [self.checkpoint(ref)]
-        seen = {chain[0].id}
-        while chain[-1].parent and (p := self._checkpoint_or_none(chain[-1].parent)) and p.id not in seen:
+        entry = self.checkpoint(ref)
+        return [entry, *self._ancestors(entry)]
+
+    def _ancestors(self, entry: CheckpointEntry) -> list[CheckpointEntry]:
+        chain: list[CheckpointEntry] = []
+        seen = {entry.id}
+        parent = entry.parent
+        while parent and parent not in seen and (p := self._checkpoint_or_none(parent)) is not None:
             chain.append(p)
             seen.add(p.id)
+            parent = p.parent
         return chain
 
     def resolve_checkpoint(self, ref: str, shift: str | None = None, split: str | None = None) -> CheckpointEntry:
-        """``ckpt:NAME[@STEP|@best[:SHIFT]|@latest|@TAG]`` -> the checkpoint (see :mod:`.refs`)."""
-        from .refs import resolve_checkpoint
-
+        """``ckpt:NAME[@STEP|@best[:SHIFT]|@latest|@TAG]`` -> the checkpoint (see :func:`resolve_checkpoint`)."""
         return resolve_checkpoint(self, ref, shift=shift, split=split)
 
     # ---------------------------------------------------------- model cards
     def _card(self, entry: CheckpointEntry, info: Mapping[str, Any] | None = None) -> str:
-        ancestors = self.lineage(entry.parent)[0:] if entry.parent else []
+        ancestors = self._ancestors(entry)
         datasets = {}
         for u in entry.data:
             datasets[(u.dataset, u.version)] = self.dataset(u.dataset, u.version)
@@ -415,5 +424,116 @@ class Catalog:
                                  "(SELECT MAX(seq) FROM tags u WHERE u.tag = t.tag) ORDER BY t.tag")
         return {t: c for t, c in rows if c is not None and (checkpoint is None or c == checkpoint)}
 
-    def card_path(self, checkpoint: str) -> Path:
-        return Path(self.checkpoint(checkpoint).path) / CARD_FILE
+
+# --------------------------------------------------------------- references
+_HINT = "list checkpoints with `nsl catalog ls checkpoints`"
+
+
+def _newest(cat: Catalog, where: str, args: tuple) -> CheckpointEntry | None:
+    r = cat.conn.execute(f"SELECT * FROM checkpoints WHERE {where} ORDER BY seq DESC LIMIT 1", args).fetchone()
+    return cat._checkpoint_row(r) if r else None
+
+
+def _names(cat: Catalog) -> list[str]:
+    return [n for (n,) in cat.conn.execute("SELECT DISTINCT name FROM checkpoints")]
+
+
+def _by_id_prefix(cat: Catalog, prefix: str) -> CheckpointEntry | None:
+    rows = cat.conn.execute("SELECT * FROM checkpoints WHERE id >= ? AND id < ? ORDER BY seq LIMIT 5",
+                            (prefix, prefix + "g")).fetchall()
+    if len(rows) > 1:
+        shown = ", ".join(f"{r[1][:12]} ({r[2]}@{r[3]})" for r in rows)
+        raise ConfigError(f"checkpoint id prefix {prefix!r} is ambiguous ({shown}); give more digits")
+    return cat._checkpoint_row(rows[0]) if rows else None
+
+
+def resolve_checkpoint(cat: Catalog, ref: str, shift: str | None = None, split: str | None = None) -> CheckpointEntry:
+    """Resolve ``[ckpt:]NAME[@STEP|@best[:SHIFT]|@latest|@TAG]``, a tag or an id (prefix).
+
+    ``@best`` is defined as follows.  Among the checkpoints registered under
+    NAME, take every evaluation on the ranking shift (and object split, if one is
+    given), pool each checkpoint's runs (successes and episodes summed over
+    seeds), and pick the highest pooled success rate.  Ties go to the checkpoint
+    with more evaluated episodes, then to the newer registration.  The ranking
+    shift is, in order: the ``:SHIFT`` written in the reference
+    (``ckpt:harsh@best:base``), the ``shift=`` argument, and otherwise the shift
+    NAME was trained for (that of its newest checkpoint).  A checkpoint never
+    evaluated on that shift cannot be best.
+
+    Name resolution for ``ckpt:X`` without a selector: a checkpoint name first
+    (its newest registration), then a tag, then an id prefix of six or more hex
+    digits.
+    """
+    if not isinstance(ref, str):
+        raise ConfigError(f"checkpoint reference {ref!r} must be a string such as ckpt:base@latest")
+    body = ref.strip().removeprefix(CKPT_PREFIX)
+    if len(body) == 64 and HEX_RE.fullmatch(body):  # a full id: the common internal case
+        r = cat.conn.execute("SELECT * FROM checkpoints WHERE id = ?", (body,)).fetchone()
+        if r:
+            return cat._checkpoint_row(r)
+    parsed = parse_checkpoint_ref(ref)
+    name, sel = parsed.name, parsed.selector
+    if sel is None or sel == "latest":
+        entry = _newest(cat, "name = ?", (name,))
+        if entry is not None:
+            return entry
+        if sel is None:
+            tags = cat.tags()
+            if name in tags:
+                return cat.checkpoint(tags[name])
+            if HEX_RE.fullmatch(name) and (entry := _by_id_prefix(cat, name)) is not None:
+                return entry
+        raise unknown("checkpoint", name, [*_names(cat), *cat.tags()], _HINT)
+    if _newest(cat, "name = ?", (name,)) is None:
+        raise unknown("checkpoint", name, _names(cat), _HINT)
+    if sel.isdigit():
+        entry = _newest(cat, "name = ? AND step = ?", (name, int(sel)))
+        if entry is None:
+            steps = [s for (s,) in cat.conn.execute("SELECT DISTINCT step FROM checkpoints WHERE name = ? "
+                                                    "ORDER BY step", (name,))]
+            shown = ", ".join(map(str, steps[:10])) + (", ..." if len(steps) > 10 else "")
+            raise UnknownReferenceError(f"checkpoint {name!r} has no step {sel}; its steps are {shown} "
+                                        f"(e.g. ckpt:{name}@{steps[-1]}, or ckpt:{name}@latest)")
+        return entry
+    if sel == "best":
+        return best_checkpoint(cat, name, shift=parsed.shift or shift, split=split)[0]
+    tags = cat.tags()
+    if sel not in tags:
+        own = [t for t, c in tags.items() if cat.checkpoint(c).name == name]
+        raise unknown("tag", sel, own or tags,
+                      f"selectors are @STEP, @best, @latest or @TAG; tag with `nsl catalog tag ckpt:{name}@STEP TAG`")
+    entry = cat.checkpoint(tags[sel])
+    if entry.name != name:
+        raise ConfigError(f"tag {sel!r} points to ckpt:{entry.ref}, not to a checkpoint of {name!r}; "
+                          f"write ckpt:{sel} for the tagged checkpoint")
+    return entry
+
+
+def best_checkpoint(cat: Catalog, name: str, shift: str | None = None,
+                    split: str | None = None) -> tuple[CheckpointEntry, dict]:
+    """The best checkpoint of ``name`` (as defined in :func:`resolve_checkpoint`) and its pooled score.
+
+    The score is ``{"shift", "split", "successes", "episodes", "rate"}``.
+    """
+    newest = _newest(cat, "name = ?", (name,))
+    if newest is None:
+        raise unknown("checkpoint", name, _names(cat), _HINT)
+    shift = shift or newest.shift
+    q = ("SELECT c.seq, c.id, SUM(e.successes), SUM(e.episodes) FROM checkpoints c "
+         "JOIN evaluations e ON e.checkpoint = c.id WHERE c.name = ? AND e.shift = ?")
+    args: list = [name, shift]
+    if split is not None:
+        q += " AND e.split = ?"
+        args.append(split)
+    rows = cat.conn.execute(q + " GROUP BY c.id", args).fetchall()
+    if not rows:
+        shifts = [s for (s,) in cat.conn.execute(
+            "SELECT DISTINCT e.shift FROM evaluations e JOIN checkpoints c ON e.checkpoint = c.id WHERE c.name = ?",
+            (name,))]
+        where = f"shift {shift!r}" + (f" ({split} objects)" if split else "")
+        also = f"; it was evaluated on: {', '.join(sorted(shifts))} (use ckpt:{name}@best:SHIFT)" if shifts else ""
+        raise UnknownReferenceError(
+            f"ckpt:{name}@best: no checkpoint of {name!r} has an evaluation on {where}{also}; "
+            f"run `nsl eval --checkpoint ckpt:{name}@latest --shift {shift}` first")
+    seq, cid, s, n = max(rows, key=lambda r: (r[2] / r[3], r[3], r[0]))
+    return cat.checkpoint(cid), {"shift": shift, "split": split, "successes": s, "episodes": n, "rate": s / n}

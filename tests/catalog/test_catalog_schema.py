@@ -1,0 +1,88 @@
+"""The catalog file: WAL, schema version, refusing foreign or newer files, migrations."""
+
+from __future__ import annotations
+
+import sqlite3
+
+import pytest
+
+from nsl import workspace
+from nsl.catalog import MIGRATIONS, SCHEMA_VERSION, Catalog
+from nsl.catalog.schema import APPLICATION_ID, connect
+from nsl.errors import CorruptDataError, IncompatibleVersionError
+
+from catalog_factories import make_dataset
+
+
+def test_new_catalog_is_wal_with_schema_version():
+    with Catalog() as cat:
+        assert cat.path == workspace.catalog_path()
+        assert cat.conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+        assert cat.conn.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
+        assert cat.conn.execute("PRAGMA application_id").fetchone()[0] == APPLICATION_ID
+        tables = {r[0] for r in cat.conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        assert {"datasets", "checkpoints", "evaluations", "tags", "schema_history"} <= tables
+    with Catalog() as cat:  # reopening does not migrate again
+        assert cat.conn.execute("SELECT COUNT(*) FROM schema_history").fetchone()[0] == SCHEMA_VERSION
+
+
+def test_text_file_is_refused(nsl_home):
+    path = workspace.catalog_path()
+    path.write_text("these are my notes, not a database\n" * 50)
+    with pytest.raises(CorruptDataError, match=r"catalog\.sqlite is not an nsl catalog \(not an SQLite database"):
+        Catalog()
+    assert path.read_text().startswith("these are my notes")  # untouched
+
+
+def test_foreign_sqlite_database_is_refused():
+    path = workspace.catalog_path()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    con = sqlite3.connect(path)
+    con.execute("CREATE TABLE recipes (name TEXT)")
+    con.commit()
+    con.close()
+    with pytest.raises(CorruptDataError, match=r"is not an nsl catalog \(an SQLite database with tables: recipes\)"):
+        Catalog()
+    con = sqlite3.connect(path)  # still the user's database, not converted
+    assert con.execute("PRAGMA journal_mode").fetchone()[0] == "delete"
+    assert con.execute("PRAGMA user_version").fetchone()[0] == 0
+    con.close()
+
+
+def test_newer_schema_is_refused():
+    Catalog().close()
+    con = sqlite3.connect(workspace.catalog_path())
+    con.execute(f"PRAGMA user_version = {SCHEMA_VERSION + 1}")
+    con.close()
+    with pytest.raises(IncompatibleVersionError,
+                       match=rf"schema version {SCHEMA_VERSION + 1}, but this nsl reads versions up to "
+                             rf"{SCHEMA_VERSION}; upgrade nsl"):
+        Catalog()
+
+
+def _v2_add_notes(conn: sqlite3.Connection) -> None:
+    conn.execute("ALTER TABLE checkpoints ADD COLUMN notes TEXT NOT NULL DEFAULT ''")
+
+
+def test_migration_path_upgrades_old_files_and_keeps_rows(tmp_path):
+    with Catalog() as cat:
+        make_dataset(cat, "grasp-base")
+    path = workspace.catalog_path()
+    conn = connect(path, {**MIGRATIONS, SCHEMA_VERSION + 1: _v2_add_notes}, code_version="future")
+    assert conn.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION + 1
+    cols = [r[1] for r in conn.execute("PRAGMA table_info(checkpoints)")]
+    assert "notes" in cols
+    assert conn.execute("SELECT name, version FROM datasets").fetchall() == [("grasp-base", 1)]
+    history = conn.execute("SELECT version, code_version FROM schema_history ORDER BY version").fetchall()
+    assert history[-1] == (SCHEMA_VERSION + 1, "future")
+    conn.close()
+    with pytest.raises(IncompatibleVersionError, match="upgrade nsl"):
+        Catalog(path)  # this release is now older than the file
+
+
+def test_empty_file_becomes_a_catalog():
+    path = workspace.catalog_path()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(b"")
+    with Catalog() as cat:
+        assert cat.datasets() == []
