@@ -104,3 +104,19 @@ def markdown_table(rows: dict[str, dict[str, SuccessRate]]) -> str:
             cells.append(f"{100 * r.success_rate:.0f}% [{100 * lo:.0f}-{100 * hi:.0f}]")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def evaluate_outcomes(make_policy: Callable, shifts: Sequence[ShiftSpec], config: EvalConfig,
+                      env_overrides: dict | None = None, progress: bool = True) -> dict[str, list[bool]]:
+    """Per-episode success on each shift, in episode-index order (scene seed ``(seed, i)``).
+
+    Two policies' outcomes from the same ``config.seed`` are paired: pass them
+    to :func:`nsl.eval.compare_paired`.  :func:`success_rate_from_outcomes` gives the rate.
+    """
+    return {spec.name: [bool(e.success) for e in run_eval_episodes(make_policy, spec, config, env_overrides,
+                                                                     progress)]
+            for spec in shifts}
+
+
+def success_rate_from_outcomes(shift: str, outcomes: Sequence[bool]) -> SuccessRate:
+    return SuccessRate(shift, len(outcomes), int(sum(bool(o) for o in outcomes)))
