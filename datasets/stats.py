@@ -30,12 +30,15 @@ def feature_stats(values: np.ndarray, is_image: bool = False) -> dict[str, np.nd
     if n == 0:
         raise ValueError("cannot compute stats of an empty feature")
     if is_image:  # (T, H, W, C) uint8 -> per channel, in [0, 1], shape (C, 1, 1)
-        flat = values.reshape(-1, values.shape[-1])
-        as_float = flat.astype(np.float64)
-        mean = as_float.mean(0)
-        std = np.sqrt(np.maximum((as_float ** 2).mean(0) - mean ** 2, 0.0))
+        import cv2
+
+        c = values.shape[-1]
+        tall = np.ascontiguousarray(values).reshape(-1, values.shape[-2], c)  # frames stacked vertically
+        mean, std = (a.reshape(-1) for a in cv2.meanStdDev(tall))  # exact: sums in float64
+        rows = tall.reshape(len(tall), -1)  # row-wise reductions vectorise; strided (N, 3) ones do not
         shape = (-1, 1, 1)
-        return {"min": (flat.min(0) / 255.0).reshape(shape), "max": (flat.max(0) / 255.0).reshape(shape),
+        return {"min": (rows.min(0).reshape(-1, c).min(0) / 255.0).reshape(shape),
+                "max": (rows.max(0).reshape(-1, c).max(0) / 255.0).reshape(shape),
                 "mean": (mean / 255.0).reshape(shape), "std": (std / 255.0).reshape(shape),
                 "count": np.array([n])}
     flat = values.reshape(n, -1)

@@ -22,7 +22,9 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import os
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -54,7 +56,7 @@ def encode_png(image: np.ndarray) -> bytes:
     """Lossless PNG bytes of an (H, W, 3) uint8 RGB image."""
     import cv2
 
-    ok, buf = cv2.imencode(".png", np.ascontiguousarray(image[..., ::-1]),
+    ok, buf = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR),
                            [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION])
     if not ok:
         raise ValueError("PNG encoding failed")
@@ -98,13 +100,28 @@ def content_hash(frames: dict[str, np.ndarray]) -> str:
     return h.hexdigest()
 
 
-def frame_table(frames: dict[str, np.ndarray], schema: pa.Schema) -> pa.Table:
-    """Arrow table of one episode's frames, images embedded as PNG bytes."""
+_POOL: list[ThreadPoolExecutor] = []
+
+
+def encode_pngs(images: Sequence[np.ndarray]) -> list[bytes]:
+    """PNG bytes of many images, on every core (OpenCV releases the GIL while encoding)."""
+    cores = os.cpu_count() or 1
+    if cores < 2 or len(images) < 64:
+        return [encode_png(im) for im in images]
+    if not _POOL:
+        _POOL.append(ThreadPoolExecutor(cores, thread_name_prefix="nsl-png"))
+    parts = np.array_split(np.arange(len(images)), 4 * cores)
+    done = _POOL[0].map(lambda idx: [encode_png(images[i]) for i in idx], parts)
+    return [png for part in done for png in part]
+
+
+def frame_table(frames: dict[str, np.ndarray], schema: pa.Schema, pngs: Sequence[bytes] | None = None) -> pa.Table:
+    """Arrow table of one episode's frames, images embedded as PNG bytes (``pngs``: already encoded)."""
     cols = []
     for name in schema.names:
         v = frames[name]
         if name in layout.IMAGE_KEYS:
-            png = pa.array([encode_png(im) for im in v], type=pa.binary())
+            png = pa.array(pngs if pngs is not None else [encode_png(im) for im in v], type=pa.binary())
             cols.append(pa.StructArray.from_arrays([png, pa.nulls(len(v), pa.string())], names=["bytes", "path"]))
         elif v.ndim == 2:
             cols.append(pa.FixedSizeListArray.from_arrays(pa.array(v.reshape(-1)), v.shape[1]))
@@ -128,16 +145,22 @@ def write_file_pair(root: Path, file_number: int, episodes: Sequence[EpisodeLike
     """Write data file ``file_number`` and its episode metadata under ``root``; return the episode rows."""
     schema = layout.frame_schema(image_size)
     loc = layout.file_location(file_number, chunks_size)
-    tables, rows = [], []
+    tables, rows, all_frames = [], [], []
     frame = first_frame
     for j, ep in enumerate(episodes):
-        idx = first_episode + j
-        frames = episode_frames(ep, idx, frame, task_index, fps)
+        frames = episode_frames(ep, first_episode + j, frame, task_index, fps)
         if frames[keys.OBS_IMAGE].shape[1:3] != (image_size, image_size):
-            raise ConfigError(f"episode {idx}: images are {frames[keys.OBS_IMAGE].shape[1:3]}, "
+            raise ConfigError(f"episode {first_episode + j}: images are {frames[keys.OBS_IMAGE].shape[1:3]}, "
                               f"the dataset is {image_size}x{image_size}")
+        all_frames.append(frames)
+        frame += len(frames[keys.INDEX])
+    pngs = encode_pngs([im for f in all_frames for im in f[keys.OBS_IMAGE]])
+    frame, at = first_frame, 0
+    for j, (ep, frames) in enumerate(zip(episodes, all_frames)):
+        idx = first_episode + j
         t = len(frames[keys.INDEX])
-        tables.append(frame_table(frames, schema))
+        tables.append(frame_table(frames, schema, pngs[at:at + t]))
+        at += t
         row = {
             "episode_index": idx, "tasks": [layout.DEFAULT_TASK], "length": t,
             "data/chunk_index": loc["chunk_index"], "data/file_index": loc["file_index"],
@@ -159,7 +182,8 @@ def write_file_pair(root: Path, file_number: int, episodes: Sequence[EpisodeLike
 def write_episode_rows(root: Path, file_number: int, rows: list[dict[str, Any]],
                        chunks_size: int = layout.DEFAULT_CHUNKS_SIZE) -> None:
     table = pa.Table.from_pylist(rows)
-    atomic_write_bytes(Path(root) / layout.episodes_path(file_number, chunks_size), _parquet_bytes([table], table.schema))
+    path = Path(root) / layout.episodes_path(file_number, chunks_size)
+    atomic_write_bytes(path, _parquet_bytes([table], table.schema))
 
 
 def write_tasks(root: Path, tasks: Sequence[str] = (layout.DEFAULT_TASK,)) -> None:

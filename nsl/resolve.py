@@ -10,11 +10,80 @@ import functools
 from collections.abc import Callable
 
 
-def policy_factory(ref: str, env_config) -> Callable:
-    """``random`` | ``oracle[:NOISE]`` -> a picklable policy factory."""
-    from nsl.collectors import scripted_policy
+def policy_factory(ref: str, env_config, epsilon: float = 0.0) -> Callable:
+    """``random`` | ``oracle[:NOISE]`` | ``ckpt:NAME[@...]`` -> a picklable policy factory.
 
-    factory = functools.partial(scripted_policy, ref, control=env_config.control, move_step=env_config.move_step,
-                                yaw_step=env_config.yaw_step)
+    A checkpoint becomes its CEM policy (``nsl.learners.load_policy``), built
+    once in each worker; ``epsilon`` adds epsilon-greedy exploration.
+    """
+    if ref.startswith("ckpt:") or ref == "base":
+        from nsl.catalog import Catalog
+        from nsl.learners import load_policy
+
+        with Catalog() as cat:
+            entry = resolve_init(cat, ref)
+        factory = functools.partial(load_policy, str(entry.path), epsilon=epsilon)
+    else:
+        from nsl.collectors import scripted_policy
+
+        factory = functools.partial(scripted_policy, ref, control=env_config.control, move_step=env_config.move_step,
+                                    yaw_step=env_config.yaw_step)
     factory()  # validate the reference now, before any worker starts
     return factory
+
+
+def dataset_uses(cat, mix: list[tuple[str, float]]) -> list:
+    """Resolve ``[(NAME[@vN][:TIER], weight)]`` to catalog ``DataUse`` records.
+
+    A dataset version that exists on disk but is not yet in the catalog is
+    registered first (the dataset folder is the record of truth).
+    """
+    from nsl.catalog import DataUse
+    from nsl.datasets import api
+
+    uses = []
+    for ref, weight in mix:
+        view = api.open_view(ref)
+        v = view.version
+        register_dataset(cat, v)
+        tier = ref.partition(":")[2] or None
+        uses.append(DataUse(v.name, v.version, weight=weight, tier=tier, hash=v.hash))
+    return uses
+
+
+def register_dataset(cat, version) -> None:
+    """Record a dataset version (``nsl.datasets`` DatasetVersion) in the catalog; idempotent."""
+    spec = version.provenance["collections"][-1]["spec"]
+    cat.register_dataset(version.name, version.version, version.root, hash=version.hash,
+                         shift=spec.get("env", {}).get("shift_spec", spec.get("env", {}).get("shift", "base")),
+                         episodes=version.num_episodes, provenance=version.provenance)
+
+
+def resolve_init(cat, ref: str):
+    """A parent checkpoint from the catalog; ``base`` falls back to the checkpoint shipped with nsl."""
+    from nsl.errors import UnknownReferenceError
+
+    try:
+        return cat.resolve_checkpoint(ref)
+    except UnknownReferenceError:
+        if ref.removeprefix("ckpt:") != "base":
+            raise
+        return register_shipped_base(cat)
+
+
+def register_shipped_base(cat):
+    """Register the base checkpoint that ships in ``nsl/assets/base`` (once) and return it."""
+    import json
+    from pathlib import Path
+
+    from nsl.errors import UnknownReferenceError
+
+    folder = Path(__file__).parent / "assets" / "base"
+    if not (folder / "model.safetensors").is_file():
+        raise UnknownReferenceError("checkpoint 'base' is not in the catalog and no shipped base checkpoint exists; "
+                                    "train one with `nsl train ... --name base`")
+    config = json.loads((folder / "config.json").read_text())
+    entry = cat.save_checkpoint("base", int(config.get("step", 0)), folder / "model.safetensors", config,
+                                shift="base", card_info={"note": "shipped with nsl"})
+    cat.tag("base", entry.id)
+    return entry

@@ -1,0 +1,184 @@
+"""``nsl train``: pre-train or fine-tune a QT-Opt Q-function offline, and catalogue the result."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+METHOD_HELP = ("ft = fine-tune all parameters of --init (the study's method); scratch = random init; "
+               "new_head = parent's trunk, re-initialised head; pnn = progressive network (frozen parent column "
+               "plus a new one); ft_pnn = pnn whose new column starts as a copy of the parent")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "train", help="pre-train (no --init) or fine-tune (--init CKPT) a Q-function offline",
+        description="Offline QT-Opt on one or more dataset versions mixed by weight. Without --init this is "
+                    "pre-training; with --init it fine-tunes from a catalogued checkpoint at 25%% of its learning "
+                    "rate (the study's recipe: mix the target data 50/50 with the base data). Running the same "
+                    "command again resumes from the last checkpoint. The final checkpoint (and, with early "
+                    "stopping, every evaluated one) is registered in the catalog under --name.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--data", action="append", required=True, metavar="REF[=WEIGHT]",
+                   help="dataset NAME[@vN][:TIER] with its share of each batch; repeat for a mix "
+                        "(default weights equal), e.g. --data grasp-base=0.5 --data grasp-harsh:100=0.5")
+    p.add_argument("--init", default=None, metavar="CKPT", help="parent checkpoint, e.g. ckpt:base or ckpt:run@best")
+    p.add_argument("--method", default=None, help=METHOD_HELP + " (default: ft with --init, else scratch)")
+    p.add_argument("--lr", type=float, default=None, help="learning rate (default 3e-4; fine-tuning: 25%% of the parent's)")
+    p.add_argument("--steps", type=int, required=True, help="gradient steps")
+    p.add_argument("--name", required=True, help="checkpoint name in the catalog (also the run folder)")
+    p.add_argument("--batch-size", type=int, default=64)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--checkpoint-every", type=int, default=2000)
+    p.add_argument("--no-augment", action="store_true", help="switch image augmentation off")
+    es = p.add_argument_group("early stopping (evaluates in the simulator every --eval-every steps)")
+    es.add_argument("--eval-every", type=int, default=0, help="steps between evaluations; 0 = no early stopping")
+    es.add_argument("--eval-episodes", type=int, default=50, help="episodes per evaluation on the target shift")
+    es.add_argument("--base-episodes", type=int, default=0,
+                    help="episodes per evaluation on the base task, to watch forgetting (0 = skip)")
+    es.add_argument("--target-shift", default=None, help="shift to evaluate on (default: the last dataset's shift)")
+    es.add_argument("--patience", type=int, default=5, help="evaluations without improvement before stopping")
+    es.add_argument("--criterion", default="eval", choices=["eval", "softopc", "auc", "td"],
+                    help="what early stopping follows: simulator success, or an offline score on held-out target "
+                         "episodes (needs no simulator)")
+    es.add_argument("--holdout", type=float, default=0.1,
+                    help="fraction of the last dataset's episodes held out for the offline scores")
+    es.add_argument("--workers", type=int, default=1, help="evaluation worker processes")
+    p.set_defaults(func=run)
+
+
+def _parse_data(specs: list[str]) -> list[tuple[str, float | None]]:
+    from nsl.errors import ConfigError
+
+    out = []
+    for s in specs:
+        ref, sep, w = s.partition("=")
+        ref = ref.removeprefix("data:")
+        if sep:
+            try:
+                weight = float(w)
+            except ValueError:
+                raise ConfigError(f"--data {s!r}: weight {w!r} is not a number; write e.g. grasp-base=0.5") from None
+        else:
+            weight = None
+        out.append((ref, weight))
+    if any(w is None for _, w in out) and any(w is not None for _, w in out):
+        raise ConfigError("--data: give a weight to every dataset or to none (equal shares)")
+    return [(r, 1.0 / len(out) if w is None else w) for r, w in out]
+
+
+def run(args: argparse.Namespace) -> int:
+    from nsl import code_version, workspace
+    from nsl.catalog import Catalog
+    from nsl.datasets import api
+    from nsl.errors import ConfigError
+    from nsl.learners import TrainConfig, train
+    from nsl.resolve import dataset_uses, resolve_init
+
+    if args.steps < 1:
+        raise ConfigError(f"--steps {args.steps} must be at least 1")
+    mix = _parse_data(args.data)
+    cat = Catalog()
+    uses = dataset_uses(cat, mix)  # validates the refs and registers unknown versions
+    parent = resolve_init(cat, args.init) if args.init else None
+    target_view = api.open_view(mix[-1][0])
+    target_shift = args.target_shift or _view_shift(target_view)
+
+    sources = [(ref, w) for ref, w in mix]
+    held_out = None
+    if args.eval_every and args.criterion != "eval":
+        train_view, held_out = api.episode_split(target_view, args.holdout)
+        sources[-1] = (train_view, mix[-1][1])
+    sampler = api.make_sampler(sources)
+
+    config = TrainConfig(steps=args.steps, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
+                         checkpoint_every=args.checkpoint_every, eval_every=args.eval_every,
+                         **({"augment_crop": 0, "augment_colour": 0.0} if args.no_augment else {}))
+    run_dir = workspace.runs_dir() / args.name
+    run_dir.mkdir(parents=True, exist_ok=True)
+    workspace.atomic_write_json(run_dir / "command.json", {
+        "argv": sys.argv, "data": [u.__dict__ for u in uses], "init": parent.id if parent else None,
+        "target_shift": target_shift, "code_version": code_version()})
+
+    monitor = None
+    if args.eval_every:
+        monitor = _monitor(args, run_dir, target_shift, held_out)
+    result = train(config, sampler, run_dir, init_checkpoint=parent.path if parent else None, method=args.method,
+                   eval_fn=monitor)
+    entry = _register(cat, args.name, result.checkpoint, parent, uses, target_shift)
+    print(f"checkpoint ckpt:{args.name}@{result.step} ({entry.id[:12]}) -> {entry.path}")
+    if monitor is not None:
+        _register_evaluated(cat, args.name, run_dir, parent, uses, target_shift, args)
+        best = cat.resolve_checkpoint(f"ckpt:{args.name}@best", shift=target_shift)
+        print(f"best by evaluation: ckpt:{args.name}@{best.step}; curve in {run_dir / 'curve.csv'}; "
+              f"plot it with `nsl report {run_dir}`")
+    return 0
+
+
+def _view_shift(view) -> str:
+    spec = view.version.provenance["collections"][-1]["spec"]
+    return spec.get("env", {}).get("shift", "base")
+
+
+def _monitor(args, run_dir: Path, target_shift: str, held_out):
+    from nsl.collectors import parse_shift
+    from nsl.eval import EarlyStopConfig, EarlyStopMonitor, simulator_scorer
+
+    cfg = EarlyStopConfig(every=args.eval_every, episodes=args.eval_episodes, base_episodes=args.base_episodes,
+                          patience=args.patience, criterion=args.criterion)
+    score_base = None
+    if args.base_episodes:
+        score_base = simulator_scorer(parse_shift("base"), cfg.eval_config(base=True, workers=args.workers))
+    offline = _offline_scorer(held_out) if held_out is not None else None
+    return EarlyStopMonitor(cfg, run_dir,
+                            score_target=simulator_scorer(parse_shift(target_shift),
+                                                          cfg.eval_config(workers=args.workers)),
+                            score_base=score_base, offline=offline)
+
+
+def _offline_scorer(view):
+    """Q-values of the policy on held-out target transitions -> SoftOPC and AUC (no simulator)."""
+    import numpy as np
+
+    from nsl import keys
+    from nsl.eval import offline_scores
+
+    arrays = view.episodes_arrays()
+    episode = arrays[keys.EPISODE_INDEX]
+    success_by_episode = {e: bool(arrays[keys.SUCCESS][episode == e].any()) for e in np.unique(episode)}
+    labels = np.array([success_by_episode[e] for e in episode])
+    obs = {"image": arrays[keys.OBS_IMAGE], "state": arrays[keys.OBS_STATE]}
+
+    def score(policy) -> dict:
+        q = np.concatenate([policy.q_values({k: v[i:i + 512] for k, v in obs.items()},
+                                            arrays[keys.ACTION][i:i + 512])
+                            for i in range(0, len(labels), 512)])
+        return {k: v for k, v in offline_scores(q, labels).items() if k in ("softopc", "auc")}
+
+    return score
+
+
+def _register(cat, name: str, folder: Path, parent, uses, shift: str):
+    config = json.loads((folder / "config.json").read_text())
+    return cat.save_checkpoint(name, int(config.get("step", 0)), folder / "model.safetensors", config,
+                               parent=parent.id if parent else None, data=uses, shift=shift)
+
+
+def _register_evaluated(cat, name, run_dir: Path, parent, uses, shift: str, args) -> None:
+    """Catalogue every evaluated checkpoint with its evaluations, so ckpt:NAME@best follows them."""
+    from nsl.eval import read_curve
+
+    for row in read_curve(run_dir / "curve.csv"):
+        folder = run_dir / "checkpoints" / f"step-{row.step:09d}"
+        if row.target is None or not folder.is_dir():
+            continue
+        entry = _register(cat, name, folder, parent, uses, shift)
+        t = row.target
+        cat.add_evaluation(entry.id, shift, episodes=t.episodes, successes=round(t.success_rate * t.episodes),
+                           seed=2000, extra={"source": "early stopping", "step": row.step})
+        if row.base is not None and row.base.episodes:
+            b = row.base
+            cat.add_evaluation(entry.id, "base", episodes=b.episodes, successes=round(b.success_rate * b.episodes),
+                               seed=2000, extra={"source": "early stopping", "step": row.step})
