@@ -55,7 +55,8 @@ def collect_episodes(config: EnvConfig, make_policy: PolicyFactory, indices: Ite
                 env.close()
             _WORKER.clear()
         return
-    ctx = mp.get_context("spawn")
+    ctx = mp.get_context("forkserver")
+    ctx.set_forkserver_preload(["nsl.collectors.preload"])
     with ctx.Pool(workers, initializer=_init_worker, initargs=(config, make_policy, batch, seed)) as pool:
         for episodes in pool.imap(_run_chunk, chunks):
             yield from episodes
