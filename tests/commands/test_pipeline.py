@@ -1,0 +1,113 @@
+"""The whole chain through the real CLI: collect, pre-train, fine-tune, evaluate, continual, report."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from nsl import workspace
+from nsl.catalog import Catalog
+from nsl.errors import ConfigError, UnknownReferenceError
+from tests.conftest import run_cli
+
+
+@pytest.fixture(scope="module")
+def home(tmp_path_factory):
+    return tmp_path_factory.mktemp("pipeline_home")
+
+
+@pytest.fixture
+def pipeline(home, monkeypatch):
+    """Small base and shifted datasets and a tiny pre-trained checkpoint, built once per module."""
+    monkeypatch.setenv("NSL_HOME", str(home))
+    if not (home / "runs" / "base-tiny").exists():
+        assert run_cli("collect", "--shift", "base", "--episodes", "24", "--policy", "oracle:0.5",
+                       "--dataset", "grasp-base", "--batch", "4") == 0
+        assert run_cli("collect", "--shift", "harsh_lighting", "--episodes", "12", "--policy", "oracle:0.5",
+                       "--dataset", "grasp-harsh", "--batch", "4") == 0
+        assert run_cli("train", "--data", "grasp-base", "--steps", "8", "--name", "base-tiny",
+                       "--checkpoint-every", "4") == 0
+    return home
+
+
+def test_fine_tuning_chain_is_catalogued_with_lineage(pipeline, capsys):
+    assert run_cli("train", "--data", "grasp-base=0.5", "--data", "grasp-harsh=0.5", "--init", "ckpt:base-tiny",
+                   "--steps", "6", "--name", "harsh-tiny") == 0
+    with Catalog() as cat:
+        child = cat.resolve_checkpoint("ckpt:harsh-tiny@latest")
+        parent = cat.resolve_checkpoint("ckpt:base-tiny@latest")
+        assert child.parent == parent.id
+        assert [(d.dataset, d.weight) for d in child.data] == [("grasp-base", 0.5), ("grasp-harsh", 0.5)]
+        assert child.shift == "harsh_lighting"
+        assert {d.name for d in cat.datasets()} >= {"grasp-base", "grasp-harsh"}
+    capsys.readouterr()
+    assert run_cli("catalog", "lineage", "ckpt:harsh-tiny@latest") == 0
+    out = capsys.readouterr().out
+    assert "base-tiny" in out and "grasp-harsh@v1" in out
+    # the fine-tuning run recorded what produced it
+    command = json.loads((workspace.runs_dir() / "harsh-tiny" / "command.json").read_text())
+    assert command["init"] == parent.id and command["target_shift"] == "harsh_lighting"
+
+
+def test_checkpoint_policy_collects_and_evaluations_are_stored(pipeline, capsys):
+    assert run_cli("collect", "--shift", "harsh_lighting", "--episodes", "4", "--policy", "ckpt:base-tiny",
+                   "--dataset", "grasp-harsh-explore", "--batch", "4", "--epsilon", "0.2") == 0
+    capsys.readouterr()
+    assert run_cli("eval", "--checkpoint", "ckpt:base-tiny", "--shift", "base,harsh_lighting", "--episodes", "4",
+                   "--batch", "4", "--json") == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out["results"]) == {"base", "harsh_lighting"}
+    with Catalog() as cat:
+        entry = cat.resolve_checkpoint("ckpt:base-tiny@latest")
+        shifts = {e.shift for e in cat.evaluations(entry.id)}
+    assert {"base", "harsh_lighting"} <= shifts
+
+
+def test_continual_rejects_bad_sequences_before_any_work(pipeline):
+    before = sorted(p.name for p in (pipeline / "datasets").iterdir())
+    with pytest.raises(UnknownReferenceError, match="unknown shift 'harsh'"):
+        run_cli("--debug", "continual", "--sequence", "harsh_lighting,harsh", "--init", "ckpt:base-tiny",
+                "--base-data", "grasp-base", "--name", "bad1")
+    with pytest.raises(UnknownReferenceError, match="nope"):
+        run_cli("--debug", "continual", "--sequence", "harsh_lighting", "--init", "ckpt:nope",
+                "--base-data", "grasp-base", "--name", "bad2")
+    with pytest.raises(ConfigError, match="repeats a task"):
+        run_cli("--debug", "continual", "--sequence", "harsh_lighting,harsh_lighting", "--init", "ckpt:base-tiny",
+                "--base-data", "grasp-base", "--name", "bad3")
+    assert sorted(p.name for p in (pipeline / "datasets").iterdir()) == before
+    assert not (pipeline / "runs" / "bad1").exists()
+
+
+def test_continual_resumes_at_the_interrupted_stage(pipeline, monkeypatch, capsys):
+    import nsl.commands.continual as continual
+
+    args = ["continual", "--sequence", "checkerboard_backing,extend_gripper,offset_gripper", "--init",
+            "ckpt:base-tiny", "--base-data", "grasp-base", "--episodes", "4", "--steps", "4", "--eval-episodes", "2",
+            "--name", "cont"]
+    real_stage = continual._stage
+    calls: list[int] = []
+
+    def stage_then_interrupt(run, i, shift, policy, cfg):
+        if i == 3:
+            raise KeyboardInterrupt  # the user presses Ctrl-C during stage 3
+        calls.append(i)
+        return real_stage(run, i, shift, policy, cfg)
+
+    monkeypatch.setattr(continual, "_stage", stage_then_interrupt)
+    assert run_cli(*args) == 130
+    matrix = json.loads((workspace.runs_dir() / "cont" / "matrix.json").read_text())
+    assert matrix["stages"] == ["init", "checkerboard_backing", "extend_gripper"]
+    s2 = workspace.runs_dir() / "cont-s2-extend-gripper" / "final" / "model.safetensors"
+    mtime = s2.stat().st_mtime_ns
+
+    monkeypatch.setattr(continual, "_stage", real_stage)
+    capsys.readouterr()
+    assert run_cli(*args) == 0
+    out = capsys.readouterr().out
+    assert "stage 1 (checkerboard_backing) done earlier" in out and "stage 2 (extend_gripper) done earlier" in out
+    assert s2.stat().st_mtime_ns == mtime  # stage 2 was not trained again
+    matrix = json.loads((workspace.runs_dir() / "cont" / "matrix.json").read_text())
+    assert matrix["stages"] == ["init", "checkerboard_backing", "extend_gripper", "offset_gripper"]
+    assert run_cli("report", "cont") == 0
+    assert (workspace.runs_dir() / "cont" / "report" / "report.md").exists()
