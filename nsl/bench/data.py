@@ -28,7 +28,7 @@ HELP = "dataset writer/loader frames/s vs LeRobot and 2-worker collection speed-
 
 def add_arguments(p) -> None:
     p.add_argument("--episodes", type=int, default=None,
-                   help="episodes collected for the speed-up and the data (default 480, quick 120)")
+                   help="episodes collected for the speed-up and the data (default 480, quick 200)")
     p.add_argument("--lerobot-episodes", type=int, default=None,
                    help="episodes written with LeRobot's writer (default 200, quick 60)")
     p.add_argument("--seconds", type=float, default=None, help="time per loader measurement (default 3, quick 1.5)")
@@ -92,7 +92,7 @@ def run(args) -> dict:
 
     import numpy as np
 
-    n = args.episodes or (120 if args.quick else 480)
+    n = args.episodes or (200 if args.quick else 480)
     n_lerobot = min(n, args.lerobot_episodes or (60 if args.quick else 200))
     seconds = args.seconds or (1.5 if args.quick else 3.0)
     home = Path(tempfile.mkdtemp(prefix="nsl-bench-data-"))
