@@ -21,6 +21,8 @@ from nsl.errors import ConfigError
 ACTION_DIM = 6  # (dx, dy, dz, dyaw, close, terminate), as in nsl.keys.ACTION_NAMES
 STATE_DIM = 2  # (gripper opening, wrist height)
 
+POOLS = ("flatten", "max")
+NORMS = ("none", "group")
 METHODS = ("scratch", "ft", "new_head", "pnn", "ft_pnn")
 FINE_TUNE_LR_FACTOR = 0.25  # fine-tuning learning rate = 25% of the parent's (the study's recipe)
 
@@ -37,6 +39,8 @@ class NetConfig:
     conv_channels: tuple[int, ...] = (32, 32, 64, 64)  # one conv layer each
     conv_strides: tuple[int, ...] = (2, 2, 2, 1)  # stride of each conv layer (kernel 3, padding 1)
     coord_channels: bool = True  # append x/y coordinate planes to the image (CoordConv)
+    norm: str = "none"  # after each conv: "none" or "group" (GroupNorm, per sample, so CEM stays batch-independent)
+    pool: str = "flatten"  # trunk output: "flatten" (position-specific) or "max" (global max over positions)
     hidden: int = 128  # width of the merged state-action layers
     head_layers: int = 2  # hidden layers evaluated once per candidate action
     action_dims: tuple[int, ...] = (0, 1, 3, 5)  # action components the network reads and CEM searches
@@ -54,6 +58,10 @@ class NetConfig:
         if any(c < 1 for c in self.conv_channels) or any(s not in (1, 2) for s in self.conv_strides):
             raise ConfigError(f"net.conv_channels {self.conv_channels} must be positive and "
                               f"net.conv_strides {self.conv_strides} each 1 or 2")
+        if self.norm not in NORMS:
+            raise ConfigError(f"net.norm {self.norm!r} is unknown; use one of {NORMS}")
+        if self.pool not in POOLS:
+            raise ConfigError(f"net.pool {self.pool!r} is unknown; use one of {POOLS}")
         if self.hidden < 1 or self.head_layers < 1:
             raise ConfigError(f"net.hidden {self.hidden} and net.head_layers {self.head_layers} must be at least 1")
         dims = self.action_dims
@@ -64,6 +72,11 @@ class NetConfig:
             raise ConfigError(f"net.default_action {self.default_action} must hold {ACTION_DIM} values in [-1, 1]")
         if self.columns < 1:
             raise ConfigError(f"net.columns {self.columns} must be at least 1")
+
+    @property
+    def feature_dim(self) -> int:
+        """Length of the trunk's output vector."""
+        return self.conv_channels[-1] * (self.feature_size ** 2 if self.pool == "flatten" else 1)
 
     @property
     def feature_size(self) -> int:

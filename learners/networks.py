@@ -40,13 +40,16 @@ class QColumn(nn.Module):
         self.n_lateral = n_lateral
         c_in = 3 + (2 if cfg.coord_channels else 0)
         self.convs = nn.ModuleList()
+        self.norms = nn.ModuleList()
         lateral: dict[str, nn.ModuleList] = {}
         for i, (c, s) in enumerate(zip(cfg.conv_channels, cfg.conv_strides)):
             self.convs.append(nn.Conv2d(c_in, c, 3, s, 1))
+            self.norms.append(nn.GroupNorm(min(8, c), c) if cfg.norm == "group" else nn.Identity())
             if i > 0 and n_lateral:
                 lateral[f"conv{i}"] = nn.ModuleList(nn.Conv2d(c_in, c, 3, s, 1, bias=False) for _ in range(n_lateral))
             c_in = c
-        flat = c_in * cfg.feature_size ** 2
+        flat = cfg.feature_dim
+        self.pool = cfg.pool
         h = cfg.hidden
         self.state_fc = nn.Linear(flat + STATE_DIM, h)
         self.action_fc = nn.Linear(len(cfg.action_dims), h, bias=False)
@@ -71,9 +74,9 @@ class QColumn(nn.Module):
             y = conv(x)
             if i > 0 and self.n_lateral:
                 y = y + self._lat(f"conv{i}", [p["convs"][i - 1] for p in prev])
-            x = torch.relu(y)
+            x = torch.relu(self.norms[i](y))
             acts.append(x)
-        flat = x.flatten(1)
+        flat = x.flatten(1) if self.pool == "flatten" else x.amax(dim=(2, 3))
         ctx = self.state_fc(torch.cat([flat, state], 1)) + self._lat("state", [p["flat"] for p in prev])
         return {"convs": acts, "flat": flat, "ctx": ctx}
 
@@ -108,7 +111,10 @@ class QNetwork(nn.Module):
     def _input(self, image: torch.Tensor) -> torch.Tensor:
         x = image - 0.5
         if self.coords is not None:
+            channels_last = not image.is_contiguous() and image.is_contiguous(memory_format=torch.channels_last)
             x = torch.cat([x, self.coords.expand(x.shape[0], -1, -1, -1)], 1)
+            if channels_last:  # keep the caller's memory format (the convolutions are faster in it)
+                x = x.contiguous(memory_format=torch.channels_last)
         return x
 
     def encode(self, image: torch.Tensor, state: torch.Tensor) -> list[dict]:

@@ -1,0 +1,93 @@
+"""The CEM policy: a Q-network acting greedily (optionally epsilon-greedy) through CEM.
+
+It follows the collectors' policy interface::
+
+    actions = policy(obs, rngs=rngs)      # obs["image"] (B, H, W, 3) uint8, obs["state"] (B, 2)
+
+and returns (B, 6) float32 environment actions.  Episode i's CEM noise and
+exploration draws come from ``rngs[i]`` alone, so its actions do not depend
+on which episodes share its batch.  For worker processes, pass
+``functools.partial(load_policy, checkpoint_dir)``: it pickles as a path and
+loads the checkpoint inside the worker.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from nsl.errors import ConfigError
+
+from .augment import to_float
+from .cem import cem_maximize, full_actions, noise_from_rngs
+from .checkpoint import checkpoint_id, load_checkpoint
+from .config import CemConfig, TrainConfig
+from .networks import QNetwork
+
+
+class CEMPolicy:
+    """Greedy CEM over a Q-network; with probability ``epsilon`` per step a uniform random action instead."""
+
+    needs_privileged = False
+
+    def __init__(self, net: QNetwork, cem: CemConfig | None = None, epsilon: float = 0.0, name: str = "cem",
+                 info: dict[str, Any] | None = None):
+        if not 0.0 <= epsilon <= 1.0:
+            raise ConfigError(f"epsilon {epsilon!r} is out of range; use 0..1 (e.g. 0.1 for exploration)")
+        self.net = net.eval()
+        self.cem = cem or CemConfig()
+        self.epsilon = float(epsilon)
+        self.name = name
+        self.info = dict(info or {})
+
+    def q_values(self, obs: dict[str, np.ndarray], actions: np.ndarray) -> np.ndarray:
+        """P(success) (B,) of environment actions (B, 6) in states ``obs``."""
+        image, state = self._inputs(obs)
+        with torch.inference_mode():
+            act = torch.from_numpy(np.asarray(actions, np.float32)[:, list(self.net.cfg.action_dims)])
+            return torch.sigmoid(self.net(image, state, act)).numpy()
+
+    def _inputs(self, obs: dict[str, np.ndarray]) -> tuple[torch.Tensor, torch.Tensor]:
+        image = np.asarray(obs["image"])
+        n = self.net.cfg.image_size
+        if image.dtype != np.uint8 or image.ndim != 4 or image.shape[1:] != (n, n, 3):
+            raise ConfigError(f"policy {self.name}: images must be uint8 (B, {n}, {n}, 3); got {image.dtype} {image.shape}")
+        return to_float(torch.from_numpy(image)), torch.from_numpy(np.asarray(obs["state"], np.float32))
+
+    def __call__(self, obs: dict[str, np.ndarray], *, rngs: list[np.random.Generator],
+                 privileged: list[dict] | None = None) -> np.ndarray:
+        image, state = self._inputs(obs)
+        if len(rngs) != len(image):
+            raise ConfigError(f"policy {self.name}: got {len(rngs)} random generators for {len(image)} observations")
+        dims = len(self.net.cfg.action_dims)
+        noise = noise_from_rngs(rngs, dims, self.cem)
+        with torch.inference_mode():
+            ctx = self.net.encode(image, state)
+            best, _ = cem_maximize(lambda cand: self.net.score(ctx, cand), noise, self.cem)
+        active = best.numpy().astype(np.float32)
+        if self.epsilon > 0:
+            for i, rng in enumerate(rngs):
+                explore, random_action = rng.random() < self.epsilon, rng.uniform(-1.0, 1.0, dims)
+                if explore:
+                    active[i] = random_action
+        return full_actions(active, self.net.cfg)
+
+    def describe(self) -> dict[str, Any]:
+        return {"policy": "cem", "name": self.name, "cem": self.cem.to_dict(), "epsilon": self.epsilon, **self.info}
+
+
+def load_policy(checkpoint_dir: str | Path, epsilon: float = 0.0, **cem_overrides: Any) -> CEMPolicy:
+    """A :class:`CEMPolicy` from a checkpoint folder; CEM settings default to the checkpoint's training ones."""
+    ckpt = load_checkpoint(Path(checkpoint_dir))
+    cem = TrainConfig.from_dict(ckpt.config["training"]).cem
+    unknown = sorted(set(cem_overrides) - set(cem.to_dict()))
+    if unknown:
+        raise ConfigError(f"unknown CEM setting(s) {unknown}; known: {sorted(cem.to_dict())}")
+    cem = replace(cem, **cem_overrides)
+    path = Path(checkpoint_dir)
+    info = {"checkpoint": str(path), "checkpoint_id": checkpoint_id(path), "step": ckpt.step}
+    return CEMPolicy(ckpt.net, cem, epsilon=epsilon, name=f"ckpt:{path.name}", info=info)

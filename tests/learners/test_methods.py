@@ -1,0 +1,102 @@
+"""The study's fine-tuning methods: what each one starts from and what it may change."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from learner_factories import TINY_NET, random_transitions, tiny_train
+
+from nsl.errors import ConfigError
+from nsl.learners import ArraySampler, load_checkpoint, train
+from nsl.learners.networks import is_head_parameter
+
+TARGET = ArraySampler.from_transitions(random_transitions(64, seed=9), name="target")
+
+
+def _inputs(n=5):
+    g = torch.Generator().manual_seed(4)
+    return torch.rand(n, 3, 16, 16, generator=g), torch.rand(n, 2, generator=g), torch.rand(n, 4, generator=g) * 2 - 1
+
+
+def _weights(path):
+    return load_checkpoint(path).net.state_dict()
+
+
+def test_fine_tuning_starts_from_exactly_the_parent_at_a_quarter_of_its_lr(parent_checkpoint, tmp_path):
+    result = train(tiny_train(steps=0), TARGET, tmp_path / "ft", init_checkpoint=parent_checkpoint, progress=False)
+    parent, child = _weights(parent_checkpoint), _weights(result.checkpoint)
+    assert parent.keys() == child.keys() and all(torch.equal(parent[k], child[k]) for k in parent)
+    cfg = load_checkpoint(result.checkpoint).config
+    assert cfg["method"] == "ft" and cfg["training"]["lr"] == pytest.approx(0.25e-3)
+    assert cfg["parent"]["path"] == str(parent_checkpoint) and len(cfg["parent"]["id"]) == 64
+    assert cfg["data"]["sources"][0]["name"] == "target"
+
+
+def test_fine_tuning_changes_every_column_weight(parent_checkpoint, tmp_path):
+    result = train(tiny_train(steps=3), TARGET, tmp_path / "ft", init_checkpoint=parent_checkpoint, progress=False)
+    parent, child = _weights(parent_checkpoint), _weights(result.checkpoint)
+    assert all(not torch.equal(parent[k], child[k]) for k in parent)
+
+
+def test_new_head_reinitialises_only_the_head(parent_checkpoint, tmp_path):
+    result = train(tiny_train(steps=0), TARGET, tmp_path / "nh", init_checkpoint=parent_checkpoint,
+                   method="new_head", progress=False)
+    parent, child = _weights(parent_checkpoint), _weights(result.checkpoint)
+    head = [k for k in parent if is_head_parameter(k)]
+    trunk = [k for k in parent if not is_head_parameter(k)]
+    assert {k.split(".")[2] for k in head} == {"state_fc", "action_fc", "hidden_fcs", "out"}
+    assert trunk and all(k.split(".")[2] == "convs" for k in trunk)
+    assert all(torch.equal(parent[k], child[k]) for k in trunk)
+    assert all(not torch.equal(parent[k], child[k]) for k in head)
+
+
+@pytest.mark.parametrize("method", ["pnn", "ft_pnn"])
+def test_progressive_network_leaves_the_base_column_unchanged(parent_checkpoint, tmp_path, method):
+    result = train(tiny_train(steps=5, lr=1e-2), TARGET, tmp_path / method, init_checkpoint=parent_checkpoint,
+                   method=method, progress=False)
+    parent = load_checkpoint(parent_checkpoint).net
+    child = load_checkpoint(result.checkpoint).net
+    assert child.cfg.columns == 2 and child.columns[0].n_lateral == 0 and child.columns[1].n_lateral == 1
+    image, state, action = _inputs()
+    with torch.no_grad():
+        base_before = parent.columns[0].encode(parent._input(image), state, [])
+        base_after = child.columns[0].encode(child._input(image), state, [])
+        assert torch.equal(base_before["ctx"], base_after["ctx"])
+        assert all(torch.equal(a, b) for a, b in zip(base_before["convs"], base_after["convs"]))
+        column0 = child.columns[0].score(base_after, action.unsqueeze(1), [])[0]
+        assert torch.equal(column0, parent(image, state, action).unsqueeze(1))
+        assert not torch.allclose(child(image, state, action), parent(image, state, action))
+    for k, v in parent.state_dict().items():
+        assert torch.equal(child.state_dict()[k], v)  # column 0 is the parent, bit for bit
+
+
+def test_ft_pnn_starts_as_the_parent_function_and_pnn_does_not(parent_checkpoint, tmp_path):
+    parent = load_checkpoint(parent_checkpoint).net
+    image, state, action = _inputs()
+    outs = {}
+    for method in ("ft_pnn", "pnn"):
+        result = train(tiny_train(steps=0), TARGET, tmp_path / method, init_checkpoint=parent_checkpoint,
+                       method=method, progress=False)
+        with torch.no_grad():
+            outs[method] = load_checkpoint(result.checkpoint).net(image, state, action)
+    with torch.no_grad():
+        expected = parent(image, state, action)
+    assert torch.allclose(outs["ft_pnn"], expected, atol=1e-6)
+    assert not torch.allclose(outs["pnn"], expected, atol=1e-3)
+
+
+def test_scratch_ignores_the_parent_weights_and_keeps_its_lr(parent_checkpoint, tmp_path):
+    result = train(tiny_train(steps=0), TARGET, tmp_path / "s", init_checkpoint=parent_checkpoint,
+                   method="scratch", progress=False)
+    parent, child = _weights(parent_checkpoint), _weights(result.checkpoint)
+    assert parent.keys() == child.keys() and not any(torch.equal(parent[k], child[k]) for k in parent)
+    assert load_checkpoint(result.checkpoint).config["training"]["lr"] == pytest.approx(1e-3)
+
+
+def test_bad_method_arguments_are_refused(parent_checkpoint, tmp_path):
+    with pytest.raises(ConfigError, match="method 'finetune' is unknown"):
+        train(tiny_train(), TARGET, tmp_path / "x", init_checkpoint=parent_checkpoint, method="finetune")
+    with pytest.raises(ConfigError, match="pass init_checkpoint"):
+        train(tiny_train(), TARGET, tmp_path / "x", method="ft")
+    with pytest.raises(ConfigError, match="architecture comes from init_checkpoint"):
+        train(tiny_train(), TARGET, tmp_path / "x", init_checkpoint=parent_checkpoint, net=TINY_NET)

@@ -1,0 +1,93 @@
+"""The QT-Opt step: clipped double-Q targets from the target networks, and the target-network updates."""
+
+from __future__ import annotations
+
+import torch
+
+from nsl import keys
+from nsl.learners import CemConfig, Learner, QNetwork, bellman_target, cem_maximize, noise_from_generator, update
+from nsl.learners.qtopt import batch_to_torch
+
+from learner_factories import TINY_CEM, TINY_NET, random_transitions, tiny_train
+
+
+def _constant(net: QNetwork, p: float) -> QNetwork:
+    """Make ``net`` output P(success) = p for every input."""
+    with torch.no_grad():
+        net.columns[-1].out.weight.zero_()
+        net.columns[-1].out.bias.fill_(torch.logit(torch.tensor(p)).item())
+    return net
+
+
+def _next(n=6):
+    g = torch.Generator().manual_seed(0)
+    return torch.rand(n, 3, 16, 16, generator=g), torch.rand(n, 2, generator=g)
+
+
+def test_target_is_reward_plus_discounted_minimum_of_the_two_target_networks():
+    image, state = _next()
+    reward = torch.tensor([0.0, 1.0, 0.0, 0.0, 1.0, 0.0])
+    done = torch.tensor([0.0, 0.0, 1.0, 0.0, 1.0, 0.0])
+    noise = noise_from_generator(6, 4, TINY_CEM, torch.Generator().manual_seed(1))
+    for p_polyak, p_lagged in ((0.8, 0.6), (0.3, 0.7)):
+        polyak, lagged = _constant(QNetwork(TINY_NET), p_polyak), _constant(QNetwork(TINY_NET), p_lagged)
+        target, value = bellman_target(polyak, lagged, image, state, reward, done, 0.9, TINY_CEM, noise)
+        v = min(p_polyak, p_lagged)
+        expected = reward + 0.9 * (1 - done) * v
+        assert torch.allclose(target, expected, atol=1e-6)
+        assert torch.allclose(value, (1 - done) * v, atol=1e-6)
+
+
+def test_target_maximises_the_polyak_network_and_evaluates_both_networks_there():
+    torch.manual_seed(0)
+    polyak, lagged = QNetwork(TINY_NET), QNetwork(TINY_NET)
+    image, state = _next(4)
+    zeros = torch.zeros(4)
+    cem = CemConfig(samples=32, elites=4, iterations=2)
+    noise = noise_from_generator(4, 4, cem, torch.Generator().manual_seed(2))
+    target, value = bellman_target(polyak, lagged, image, state, zeros, zeros, 0.9, cem, noise)
+    with torch.no_grad():
+        ctx = polyak.encode(image, state)
+        first_round = polyak.score(ctx, noise[:, 0].clamp(-1, 1) * cem.init_std).max(1).values
+        a_star, logit_star = cem_maximize(lambda c: polyak.score(ctx, c), noise, cem)
+        q_lagged = torch.sigmoid(lagged(image, state, a_star))
+    assert torch.all(logit_star >= first_round - 1e-6)  # CEM's choice beats every first-round candidate
+    assert torch.allclose(value, torch.minimum(torch.sigmoid(logit_star), q_lagged), atol=1e-6)
+    assert torch.allclose(target, 0.9 * value)
+
+
+def test_update_trains_the_online_network_and_moves_the_targets():
+    torch.manual_seed(0)
+    cfg = tiny_train(polyak=0.9, lag_period=3)
+    learner = Learner.create(QNetwork(TINY_NET), 1e-3, cfg)
+    batch = batch_to_torch(random_transitions(16))
+    before = {k: v.clone() for k, v in learner.online.state_dict().items()}
+    polyak_before = {k: v.clone() for k, v in learner.polyak.state_dict().items()}
+    lagged_before = {k: v.clone() for k, v in learner.lagged.state_dict().items()}
+    metrics = update(learner, batch, cfg, step=0)
+    assert set(metrics) >= {"losses/q_loss", "q/mean", "q/target_mean", "q/next_value_mean"}
+    assert all(isinstance(v, float) for v in metrics.values())
+    online = learner.online.state_dict()
+    name = "columns.0.out.bias"
+    assert not torch.equal(online[name], before[name])
+    expected = 0.9 * polyak_before[name] + 0.1 * online[name]
+    assert torch.allclose(learner.polyak.state_dict()[name], expected, atol=1e-7)
+    assert torch.equal(learner.lagged.state_dict()[name], lagged_before[name])  # not yet refreshed
+    update(learner, batch, cfg, step=1)
+    update(learner, batch, cfg, step=2)  # the third step refreshes the lagged copy
+    assert torch.equal(learner.lagged.state_dict()[name], learner.online.state_dict()[name])
+
+
+def test_augmentation_changes_the_inputs_only_when_enabled():
+    from nsl.learners.augment import prepare_images
+
+    images = torch.from_numpy(random_transitions(4)[keys.OBS_IMAGE])
+    g = torch.Generator().manual_seed(0)
+    plain = prepare_images(images, 0, 0.0, g)
+    assert torch.allclose(plain, images.permute(0, 3, 1, 2).float() / 255)
+    shifted = prepare_images(images, 2, 0.0, g)
+    jittered = prepare_images(images, 0, 0.3, g)
+    assert shifted.shape == jittered.shape == plain.shape
+    assert not torch.equal(shifted, plain) and not torch.equal(jittered, plain)
+    assert set(shifted.unique().tolist()) <= set(plain.unique().tolist())  # a shift only moves pixels
+    assert jittered.min() >= 0 and jittered.max() <= 1

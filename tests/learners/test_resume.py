@@ -1,0 +1,82 @@
+"""A killed run resumes from its last checkpoint and ends with bit-identical weights."""
+
+from __future__ import annotations
+
+import csv
+
+import pytest
+import torch
+from learner_factories import TINY_NET, tiny_train
+
+from nsl.errors import ConfigError
+from nsl.learners import load_checkpoint, train
+
+
+class _Crash(Exception):
+    pass
+
+
+class _CrashingSampler:
+    """Delegates to a sampler and raises on its ``crash_at``-th call (0-based), like a kill mid-run."""
+
+    def __init__(self, inner, crash_at):
+        self.inner, self.crash_at, self.calls = inner, crash_at, 0
+
+    def sample(self, batch_size, rng):
+        if self.calls == self.crash_at:
+            raise _Crash("killed")
+        self.calls += 1
+        return self.inner.sample(batch_size, rng)
+
+    def describe(self):
+        return self.inner.describe()
+
+
+def test_resumed_run_equals_an_uninterrupted_one(random_sampler, tmp_path):
+    cfg = tiny_train(steps=24, checkpoint_every=8, log_every=4, lag_period=5, augment_crop=2, augment_colour=0.2)
+    whole = train(cfg, random_sampler, tmp_path / "whole", net=TINY_NET, progress=False)
+    with pytest.raises(_Crash):
+        train(cfg, _CrashingSampler(random_sampler, crash_at=13), tmp_path / "killed", net=TINY_NET, progress=False)
+    assert not (tmp_path / "killed" / "final").exists()
+    resumed = train(cfg, random_sampler, tmp_path / "killed", net=TINY_NET, progress=False)
+    a, b = load_checkpoint(whole.checkpoint).net.state_dict(), load_checkpoint(resumed.checkpoint).net.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    with open(tmp_path / "killed" / "metrics.csv") as f:
+        steps = [int(r["step"]) for r in csv.DictReader(f)]
+    assert steps == [4, 8, 12, 16, 20, 24]  # rows after the resumed step (8) were written once
+    # the target networks and optimiser were restored too: continuing both runs gives the same weights again
+    longer = cfg.replace(steps=32)
+    a2 = train(longer, random_sampler, tmp_path / "whole", net=TINY_NET, progress=False)
+    b2 = train(longer, random_sampler, tmp_path / "killed", net=TINY_NET, progress=False)
+    a, b = load_checkpoint(a2.checkpoint).net.state_dict(), load_checkpoint(b2.checkpoint).net.state_dict()
+    assert a2.step == 32 and all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_a_finished_run_returns_at_once_and_other_settings_are_refused(random_sampler, tmp_path):
+    cfg = tiny_train(steps=4, checkpoint_every=2)
+    first = train(cfg, random_sampler, tmp_path / "run", net=TINY_NET, progress=False)
+    again = train(cfg, _CrashingSampler(random_sampler, crash_at=0), tmp_path / "run", net=TINY_NET, progress=False)
+    assert again.step == first.step == 4
+    with pytest.raises(ConfigError, match=r"different training \(\['gamma'\]\)"):
+        train(cfg.replace(gamma=0.5), random_sampler, tmp_path / "run", net=TINY_NET, progress=False)
+
+
+def test_eval_hook_is_called_every_k_steps_and_can_stop_the_run(random_sampler, tmp_path):
+    calls = []
+
+    def eval_fn(step, policy):
+        import numpy as np
+
+        obs = {"image": np.zeros((2, 16, 16, 3), np.uint8), "state": np.zeros((2, 2), np.float32)}
+        actions = policy(obs, rngs=[np.random.default_rng(0), np.random.default_rng(1)])
+        calls.append((step, actions.shape))
+        return {"success": 0.5, "stop": step >= 6}
+
+    result = train(tiny_train(steps=20, eval_every=3), random_sampler, tmp_path / "run", net=TINY_NET,
+                   eval_fn=eval_fn, progress=False)
+    assert [c[0] for c in calls] == [0, 3, 6] and calls[0][1] == (2, 6)
+    assert result.stopped_early and result.step == 6
+    assert load_checkpoint(result.checkpoint).step == 6
+    assert (tmp_path / "run" / "checkpoints" / "step-000000006").is_dir()
+    assert [e["step"] for e in result.evals] == [0, 3, 6]
+    assert (tmp_path / "run" / "eval.jsonl").read_text().count("\n") == 3
