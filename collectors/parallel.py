@@ -56,7 +56,9 @@ def collect_episodes(config: EnvConfig, make_policy: PolicyFactory, indices: Ite
             _WORKER.clear()
         return
     ctx = mp.get_context("forkserver")
-    ctx.set_forkserver_preload(["nsl.collectors.preload"])
+    # Workers fork from a server that already imported MuJoCo and parsed the meshes, and torch
+    # when the caller uses it (a checkpoint's policy), so they start in milliseconds.
+    ctx.set_forkserver_preload(["nsl.collectors.preload"] + (["torch"] if "torch" in sys.modules else []))
     with ctx.Pool(workers, initializer=_init_worker, initargs=(config, make_policy, batch, seed)) as pool:
         for episodes in pool.imap(_run_chunk, chunks):
             yield from episodes

@@ -1,0 +1,53 @@
+"""``nsl bench eval``: episodes/s of CEM-policy evaluation with 1 and with 2 workers.
+
+The policy is a freshly initialised Q-network (the speed does not depend on
+its weights) acting through CEM (64 samples, 6 elites, 2 iterations), batched
+over 8 environments per worker, on the base task's test objects.
+"""
+
+from __future__ import annotations
+
+import functools
+import tempfile
+import time
+from pathlib import Path
+
+HELP = "episodes/s of CEM-policy evaluation with 1 and 2 worker processes"
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--episodes", type=int, default=None, help="episodes per measurement (default 160, quick 48)")
+
+
+def _make_checkpoint(folder: Path) -> Path:
+    import torch
+
+    from nsl.learners import NetConfig, QNetwork, TrainConfig, checkpoint_config, save_checkpoint
+
+    torch.manual_seed(0)
+    net = QNetwork(NetConfig())
+    config = checkpoint_config(net, training=TrainConfig(lr=3e-4), method="scratch", data={}, parent=None, step=0)
+    return save_checkpoint(folder / "bench-policy", net, config)
+
+
+def _rate(make_policy, episodes: int, workers: int) -> float:
+    from nsl.collectors import EnvConfig, collect_episodes
+
+    t0 = time.perf_counter()
+    n = sum(1 for _ in collect_episodes(EnvConfig(split="test"), make_policy, range(episodes), seed=7,
+                                        workers=workers, batch=8))
+    return n / (time.perf_counter() - t0)
+
+
+def run(args) -> dict:
+    from nsl.learners import load_policy
+
+    episodes = args.episodes or (48 if args.quick else 160)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = _make_checkpoint(Path(tmp))
+        make_policy = functools.partial(load_policy, str(path))
+        one = _rate(make_policy, episodes, 1)
+        two = _rate(make_policy, episodes, 2)
+    return {"episodes": episodes, "eval_episodes_per_s_1_worker": round(one, 2),
+            "eval_episodes_per_s_2_workers": round(two, 2), "speedup_2_workers": round(two / one, 2),
+            "cem": "64/6/2", "batch_per_worker": 8}
