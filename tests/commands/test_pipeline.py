@@ -111,3 +111,10 @@ def test_continual_resumes_at_the_interrupted_stage(pipeline, monkeypatch, capsy
     assert matrix["stages"] == ["init", "checkerboard_backing", "extend_gripper", "offset_gripper"]
     assert run_cli("report", "cont") == 0
     assert (workspace.runs_dir() / "cont" / "report" / "report.md").exists()
+
+
+def test_bench_eval_reports_both_worker_counts(capsys):
+    assert run_cli("bench", "eval", "--json", "--episodes", "16") == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["episodes"] == 16
+    assert out["eval_episodes_per_s_1_worker"] > 0 and out["eval_episodes_per_s_2_workers"] > 0
