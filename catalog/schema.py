@@ -143,10 +143,10 @@ def connect(path: Path, migrations: Mapping[int, Callable[[sqlite3.Connection], 
     try:
         conn.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
         try:
-            app_id, version, tables = _identify(conn)
+            app_id, version, tables = _identify_snapshot(conn)
         except sqlite3.DatabaseError as e:
             if "locked" in str(e).lower() or "busy" in str(e).lower():
-                app_id, version, tables = _retry(lambda: _identify(conn))  # type: ignore[misc]
+                app_id, version, tables = _retry(lambda: _identify_snapshot(conn))  # type: ignore[misc]
             else:
                 raise CorruptDataError(
                     f"{path} is not an nsl catalog (not an SQLite database: {e}); move it away, "
@@ -164,6 +164,21 @@ def connect(path: Path, migrations: Mapping[int, Callable[[sqlite3.Connection], 
         conn.close()
         raise
     return conn
+
+
+def _identify_snapshot(conn: sqlite3.Connection) -> tuple[int, int, list[str]]:
+    """``_identify`` inside one read transaction.
+
+    In autocommit mode each statement would see its own snapshot, so a reader
+    racing the creating process could see the new tables but the old (zero)
+    application id, and call a half-seen catalog foreign.
+    """
+    conn.execute("BEGIN")
+    try:
+        return _identify(conn)
+    finally:
+        if conn.in_transaction:
+            conn.execute("ROLLBACK")
 
 
 def _identify(conn: sqlite3.Connection) -> tuple[int, int, list[str]]:
