@@ -1,7 +1,11 @@
 """``GraspEnv``: vision-based bin grasping as a Gymnasium environment.
 
-Observation: ``{"image": (H, W, 3) uint8, "state": float32[2]}`` where state is
-(gripper opening in [0, 1], wrist height in [0, 1]).
+Observation: ``{"image": (H, W, 3) uint8, "state": float32[6]}`` where state is
+the robot's proprioception: gripper opening in [0, 1], wrist height in [0, 1],
+wrist x and y in [-1, 1] (a fraction of the reach), and the sine and cosine of
+the wrist yaw.  A real arm reports these from its joint encoders; with them
+and a fixed camera a learner can relate the gripper to the objects it sees
+instead of inferring the gripper's pose from a few pixels.
 
 Action (QT-Opt style, each in [-1, 1]): ``(dx, dy, dz, dyaw, close, terminate)``.
 
@@ -49,10 +53,10 @@ from .scene import (  # noqa: E402
 )
 from .shifts import ShiftSpec, parse_shift  # noqa: E402
 
-ENV_VERSION = "nsl-grasp-v1"
+ENV_VERSION = "nsl-grasp-v2"  # v2: 6-d gripper state, camera framed on the bin
 CONTROL_MODES = ("auto_descent", "full")
 ACTION_DIM = 6
-STATE_DIM = 2
+STATE_DIM = 6
 
 
 @dataclass(frozen=True)
@@ -147,7 +151,7 @@ class GraspEnv(gym.Env):
         n = config.image_size
         self.observation_space = gym.spaces.Dict({
             "image": gym.spaces.Box(0, 255, (n, n, 3), np.uint8),
-            "state": gym.spaces.Box(0.0, 1.0, (STATE_DIM,), np.float32),
+            "state": gym.spaces.Box(-1.0, 1.0, (STATE_DIM,), np.float32),
         })
         self.action_space = gym.spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
         if renderer is not None and (renderer.height, renderer.width) != (n, n):
@@ -333,7 +337,9 @@ class GraspEnv(gym.Env):
         opening = 0.5 * (d.qpos[h.qpos["finger_left"]] + d.qpos[h.qpos["finger_right"]]) / FINGER_OPEN
         z0, z1 = WRIST_Z_RANGE
         height = (d.qpos[h.qpos["wrist_z"]] - z0) / (z1 - z0)
-        return np.clip(np.array([opening, height], dtype=np.float32), 0.0, 1.0)
+        x, y = (d.qpos[h.qpos[j]] / WORKSPACE_HALF for j in ("wrist_x", "wrist_y"))
+        yaw = d.qpos[h.qpos["wrist_yaw"]]
+        return np.clip(np.array([opening, height, x, y, math.sin(yaw), math.cos(yaw)], dtype=np.float32), -1.0, 1.0)
 
     def render(self) -> np.ndarray:
         return self._renderer.render(self.model, self.data, CAMERA_NAME)

@@ -25,7 +25,7 @@ class Episode:
 
     index: int
     images: np.ndarray  # (T, H, W, 3) uint8
-    states: np.ndarray  # (T, 2) float32
+    states: np.ndarray  # (T, STATE_DIM) float32
     actions: np.ndarray  # (T, 6) float32
     rewards: np.ndarray  # (T,) float32
     terminated: bool

@@ -9,7 +9,7 @@ written first, so the data file's presence marks the pair as complete.
 
 Episodes are duck-typed records (``nsl.collectors.Episode`` fits)::
 
-    images (T, H, W, 3) uint8, states (T, 2), actions (T, 6), rewards (T,),
+    images (T, H, W, 3) uint8, states (T, len(STATE_NAMES)), actions (T, 6), rewards (T,),
     terminated, truncated, success
 
 Frame ``t`` is the observation before action ``t``; ``next.done`` is true only on

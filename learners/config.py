@@ -19,9 +19,9 @@ from typing import Any
 from nsl.errors import ConfigError
 
 ACTION_DIM = 6  # (dx, dy, dz, dyaw, close, terminate), as in nsl.keys.ACTION_NAMES
-STATE_DIM = 2  # (gripper opening, wrist height)
+STATE_DIM = 6  # default state length: opening, height, x, y, sin yaw, cos yaw (nsl.keys.STATE_NAMES)
 
-POOLS = ("flatten", "max")
+POOLS = ("flatten", "max", "spatial")
 NORMS = ("none", "group")
 METHODS = ("scratch", "ft", "new_head", "pnn", "ft_pnn")
 FINE_TUNE_LR_FACTOR = 0.25  # fine-tuning learning rate = 25% of the parent's (the study's recipe)
@@ -40,7 +40,10 @@ class NetConfig:
     conv_strides: tuple[int, ...] = (2, 2, 2, 1)  # stride of each conv layer (kernel 3, padding 1)
     coord_channels: bool = True  # append x/y coordinate planes to the image (CoordConv)
     norm: str = "none"  # after each conv: "none" or "group" (GroupNorm, per sample, so CEM stays batch-independent)
-    pool: str = "flatten"  # trunk output: "flatten" (position-specific) or "max" (global max over positions)
+    pool: str = "flatten"  # trunk output: "flatten" (position-specific), "max" (global max over positions), or
+    # "spatial" (the state-action embedding is added to every position of the feature map, a 1x1 conv
+    # follows, then a max over positions: QT-Opt's tile-and-add merge, evaluated per candidate)
+    state_dim: int = STATE_DIM  # length of the gripper state vector the network reads
     hidden: int = 128  # width of the merged state-action layers
     head_layers: int = 2  # hidden layers evaluated once per candidate action
     action_dims: tuple[int, ...] = (0, 1, 3, 5)  # action components the network reads and CEM searches
@@ -70,6 +73,11 @@ class NetConfig:
                               "(0 dx, 1 dy, 2 dz, 3 dyaw, 4 close, 5 terminate)")
         if len(self.default_action) != ACTION_DIM or any(not -1.0 <= v <= 1.0 for v in self.default_action):
             raise ConfigError(f"net.default_action {self.default_action} must hold {ACTION_DIM} values in [-1, 1]")
+        if self.state_dim < 1:
+            raise ConfigError(f"net.state_dim {self.state_dim} must be at least 1")
+        if self.pool == "spatial" and self.columns > 1:
+            raise ConfigError("net.pool 'spatial' has no progressive-network laterals yet; use pool 'flatten' "
+                              "for the pnn and ft_pnn methods")
         if self.columns < 1:
             raise ConfigError(f"net.columns {self.columns} must be at least 1")
 

@@ -27,9 +27,9 @@ import copy
 import torch
 from torch import nn
 
-from .config import STATE_DIM, NetConfig
+from .config import NetConfig
 
-HEAD_PREFIXES = ("state_fc", "action_fc", "hidden_fcs", "out", "lateral.state", "lateral.hidden", "lateral.out")
+HEAD_PREFIXES = ("state_fc", "state_proj", "spatial_fc", "action_fc", "hidden_fcs", "out", "lateral.state", "lateral.hidden", "lateral.out")
 
 
 class QColumn(nn.Module):
@@ -51,7 +51,17 @@ class QColumn(nn.Module):
         flat = cfg.feature_dim
         self.pool = cfg.pool
         h = cfg.hidden
-        self.state_fc = nn.Linear(flat + STATE_DIM, h)
+        if cfg.pool == "spatial":
+            # per position: W_f [features, coordinates] + W_s state (once per state), then + W_a action
+            self.state_fc = nn.Conv2d(cfg.conv_channels[-1] + 2, h, 1)
+            self.state_proj = nn.Linear(cfg.state_dim, h, bias=False)
+            self.spatial_fc = nn.Conv2d(h, h, 1)
+            n = cfg.feature_size
+            ramp = torch.linspace(-1.0, 1.0, n)
+            self.register_buffer("coords", torch.stack([ramp.view(1, n).expand(n, n), ramp.view(n, 1).expand(n, n)])
+                                 .unsqueeze(0), persistent=False)
+        else:
+            self.state_fc = nn.Linear(flat + cfg.state_dim, h)
         self.action_fc = nn.Linear(len(cfg.action_dims), h, bias=False)
         self.hidden_fcs = nn.ModuleList(nn.Linear(h, h) for _ in range(cfg.head_layers - 1))
         self.out = nn.Linear(h, 1)
@@ -76,13 +86,24 @@ class QColumn(nn.Module):
                 y = y + self._lat(f"conv{i}", [p["convs"][i - 1] for p in prev])
             x = torch.relu(self.norms[i](y))
             acts.append(x)
+        if self.pool == "spatial":
+            fmap = torch.cat([x, self.coords.expand(x.shape[0], -1, -1, -1).to(x.dtype)], 1)
+            ctx = self.state_fc(fmap) + self.state_proj(state)[:, :, None, None]
+            return {"convs": acts, "flat": x, "ctx": ctx}
         flat = x.flatten(1) if self.pool == "flatten" else x.amax(dim=(2, 3))
         ctx = self.state_fc(torch.cat([flat, state], 1)) + self._lat("state", [p["flat"] for p in prev])
         return {"convs": acts, "flat": flat, "ctx": ctx}
 
     def score(self, cache: dict, actions: torch.Tensor, prev: list[list[torch.Tensor]]) -> tuple[torch.Tensor, list]:
         """Logits (B, N) for candidate ``actions`` (B, N, A), plus the head activations for later columns."""
-        h = torch.relu(cache["ctx"].unsqueeze(1) + self.action_fc(actions))
+        if self.pool == "spatial":
+            b, n = actions.shape[:2]
+            ctx = cache["ctx"]  # (B, H, h, w)
+            z = torch.relu(ctx.unsqueeze(1) + self.action_fc(actions)[..., None, None])  # (B, N, H, h, w)
+            z = torch.relu(self.spatial_fc(z.flatten(0, 1)))
+            h = z.amax(dim=(2, 3)).view(b, n, -1)
+        else:
+            h = torch.relu(cache["ctx"].unsqueeze(1) + self.action_fc(actions))
         acts = [h]
         for j, fc in enumerate(self.hidden_fcs):
             h = torch.relu(fc(h) + self._lat(f"hidden{j}", [p[j] for p in prev]))
@@ -152,6 +173,8 @@ def reinit_head(net: QNetwork) -> None:
     """Re-initialise the last column's head (``new_head``); the trunk keeps its weights."""
     col = net.columns[-1]
     mods = [col.state_fc, col.action_fc, *col.hidden_fcs, col.out]
+    if col.pool == "spatial":
+        mods += [col.state_proj, col.spatial_fc]
     for name, lat in col.lateral.items():
         if not name.startswith("conv"):
             mods.extend(lat)

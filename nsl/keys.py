@@ -5,7 +5,7 @@ Learner and loader code uses these names, never string literals.
 """
 
 OBS_IMAGE = "observation.image"  # (H, W, 3) uint8 camera frame
-OBS_STATE = "observation.state"  # (2,) float32: gripper opening, wrist height
+OBS_STATE = "observation.state"  # (6,) float32: see STATE_NAMES
 ACTION = "action"  # (6,) float32: dx, dy, dz, dyaw, close, terminate in [-1, 1]
 REWARD = "next.reward"  # float32: 1 on the step that lifts an object
 DONE = "next.done"  # bool: the episode terminated (not a time-limit truncation)
@@ -22,6 +22,6 @@ TASK_INDEX = "task_index"
 NEXT_OBS_IMAGE = "next.observation.image"
 NEXT_OBS_STATE = "next.observation.state"
 
-STATE_NAMES = ["gripper_opening", "wrist_height"]
+STATE_NAMES = ["gripper_opening", "wrist_height", "wrist_x", "wrist_y", "wrist_sin_yaw", "wrist_cos_yaw"]
 ACTION_NAMES = ["dx", "dy", "dz", "dyaw", "close", "terminate"]
 FPS = 10  # nominal control rate recorded in dataset metadata (one frame per control step)

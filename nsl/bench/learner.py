@@ -46,7 +46,7 @@ def _synthetic_sampler(n: int = 512, seed: int = 0):
     rng = np.random.default_rng(seed)
     images = rng.integers(0, 256, (n, IMAGE, IMAGE, 3), dtype=np.uint8)
     ep = np.arange(n) % 8
-    return ArraySampler(images, rng.random((n, 2), dtype=np.float32), rng.uniform(-1, 1, (n, 6)).astype(np.float32),
+    return ArraySampler(images, rng.random((n, len(keys.STATE_NAMES)), dtype=np.float32), rng.uniform(-1, 1, (n, 6)).astype(np.float32),
                         ((ep == 7) & (rng.random(n) < 0.5)).astype(np.float32), (ep == 7).astype(np.float32),
                         np.minimum(np.arange(n) + 1, n - 1), name="synthetic")
 

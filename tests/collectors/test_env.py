@@ -105,7 +105,10 @@ def test_observation_layout_and_configurable_size():
     env = GraspEnv(EnvConfig(image_size=32))
     obs, info = env.reset(seed=0)
     assert obs["image"].shape == (32, 32, 3) and obs["image"].dtype == np.uint8
-    assert obs["state"].shape == (2,) and obs["state"][0] == pytest.approx(1.0, abs=0.02)  # open
+    assert obs["state"].shape == (6,) and obs["state"][0] == pytest.approx(1.0, abs=0.02)  # open
+    p = env.privileged_state()["gripper"]  # proprioception: the wrist pose, scaled
+    assert obs["state"][2:4] == pytest.approx(p[:2] / 0.13, abs=1e-5)
+    assert obs["state"][4:] == pytest.approx([np.sin(p[3]), np.cos(p[3])], abs=1e-5)
     assert env.observation_space.contains(obs)
     assert 1 <= info["num_objects"] <= 5
 

@@ -29,7 +29,8 @@ def synth_episode(index: int, length: int, *, truncated: bool = False, success: 
     images = rng.integers(0, 256, (length, size, size, 3), dtype=np.uint8)
     images[:, 0, 0, 0] = index
     images[:, 0, 0, 1] = np.arange(length)
-    states = np.stack([np.full(length, state_offset), np.arange(length) / 10.0], 1).astype(np.float32)
+    states = np.zeros((length, 6), np.float32)
+    states[:, 0], states[:, 1], states[:, 5] = state_offset, np.arange(length) / 10.0, 1.0
     actions = rng.uniform(-1, 1, (length, 6)).astype(np.float32)
     rewards = np.zeros(length, np.float32)
     if success and not truncated:

@@ -10,7 +10,7 @@ from nsl.datasets import api
 from nsl.errors import ConfigError
 
 BATCH_SPEC = {keys.OBS_IMAGE: ((16, 16, 3), np.uint8), keys.NEXT_OBS_IMAGE: ((16, 16, 3), np.uint8),
-              keys.OBS_STATE: ((2,), np.float32), keys.NEXT_OBS_STATE: ((2,), np.float32),
+              keys.OBS_STATE: ((6,), np.float32), keys.NEXT_OBS_STATE: ((6,), np.float32),
               keys.ACTION: ((6,), np.float32), keys.REWARD: ((), np.float32), keys.DONE: ((), np.float32)}
 
 

@@ -7,7 +7,7 @@ import torch
 from learner_factories import TINY_NET, random_transitions, tiny_train
 
 from nsl.errors import ConfigError
-from nsl.learners import ArraySampler, load_checkpoint, train
+from nsl.learners import ArraySampler, NetConfig, QNetwork, load_checkpoint, train
 from nsl.learners.networks import is_head_parameter
 
 TARGET = ArraySampler.from_transitions(random_transitions(64, seed=9), name="target")
@@ -15,7 +15,7 @@ TARGET = ArraySampler.from_transitions(random_transitions(64, seed=9), name="tar
 
 def _inputs(n=5):
     g = torch.Generator().manual_seed(4)
-    return torch.rand(n, 3, 16, 16, generator=g), torch.rand(n, 2, generator=g), torch.rand(n, 4, generator=g) * 2 - 1
+    return torch.rand(n, 3, 16, 16, generator=g), torch.rand(n, 6, generator=g), torch.rand(n, 4, generator=g) * 2 - 1
 
 
 def _weights(path):
@@ -100,3 +100,27 @@ def test_bad_method_arguments_are_refused(parent_checkpoint, tmp_path):
         train(tiny_train(), TARGET, tmp_path / "x", method="ft")
     with pytest.raises(ConfigError, match="architecture comes from init_checkpoint"):
         train(tiny_train(), TARGET, tmp_path / "x", init_checkpoint=parent_checkpoint, net=TINY_NET)
+
+
+def test_new_head_of_a_spatial_network_reinitialises_its_spatial_layers_only(random_sampler, tmp_path):
+    net = NetConfig.from_dict({**TINY_NET.to_dict(), "pool": "spatial"})
+    parent = train(tiny_train(steps=2), random_sampler, tmp_path / "p", net=net, progress=False).checkpoint
+    result = train(tiny_train(steps=0), TARGET, tmp_path / "nh", init_checkpoint=parent, method="new_head",
+                   progress=False)
+    before, after = _weights(parent), _weights(result.checkpoint)
+    head = {k.split(".")[2] for k in before if is_head_parameter(k)}
+    assert head == {"state_fc", "state_proj", "spatial_fc", "action_fc", "hidden_fcs", "out"}
+    for k in before:
+        assert torch.equal(before[k], after[k]) != is_head_parameter(k), k
+
+
+def test_spatial_network_scores_candidates_as_its_forward_pass_does():
+    net = QNetwork(NetConfig.from_dict({**TINY_NET.to_dict(), "pool": "spatial"}))
+    image, state, _ = _inputs(3)
+    candidates = torch.rand(3, 7, 4) * 2 - 1
+    with torch.no_grad():
+        batched = net.score(net.encode(image, state), candidates)
+        one_by_one = torch.stack([net(image, state, candidates[:, j]) for j in range(7)], 1)
+    assert torch.allclose(batched, one_by_one, atol=1e-5)
+    with pytest.raises(ConfigError, match="spatial"):
+        NetConfig(pool="spatial", columns=2)

@@ -15,7 +15,7 @@ from nsl.learners import CEMPolicy, load_policy
 def _obs(n: int, seed: int = 0) -> dict[str, np.ndarray]:
     rng = np.random.default_rng(seed)
     return {"image": rng.integers(0, 256, (n, 16, 16, 3), dtype=np.uint8),
-            "state": rng.random((n, 2), dtype=np.float32)}
+            "state": rng.random((n, 6), dtype=np.float32)}
 
 
 def test_policy_acts_in_the_active_dims_and_fills_the_others(parent_checkpoint):
@@ -59,6 +59,6 @@ def test_epsilon_greedy_explores(parent_checkpoint):
 
 def test_images_of_the_wrong_size_are_refused(parent_checkpoint):
     policy = load_policy(parent_checkpoint)
-    bad = {"image": np.zeros((1, 32, 32, 3), np.uint8), "state": np.zeros((1, 2), np.float32)}
+    bad = {"image": np.zeros((1, 32, 32, 3), np.uint8), "state": np.zeros((1, 6), np.float32)}
     with pytest.raises(ConfigError, match="images must be uint8"):
         policy(bad, rngs=[np.random.default_rng(0)])

@@ -21,7 +21,7 @@ def _constant(net: QNetwork, p: float) -> QNetwork:
 
 def _next(n=6):
     g = torch.Generator().manual_seed(0)
-    return torch.rand(n, 3, 16, 16, generator=g), torch.rand(n, 2, generator=g)
+    return torch.rand(n, 3, 16, 16, generator=g), torch.rand(n, 6, generator=g)
 
 
 def test_target_is_reward_plus_discounted_minimum_of_the_two_target_networks():

@@ -67,7 +67,7 @@ def test_eval_hook_is_called_every_k_steps_and_can_stop_the_run(random_sampler, 
     def eval_fn(step, policy):
         import numpy as np
 
-        obs = {"image": np.zeros((2, 16, 16, 3), np.uint8), "state": np.zeros((2, 2), np.float32)}
+        obs = {"image": np.zeros((2, 16, 16, 3), np.uint8), "state": np.zeros((2, 6), np.float32)}
         actions = policy(obs, rngs=[np.random.default_rng(0), np.random.default_rng(1)])
         calls.append((step, actions.shape))
         return {"success": 0.5, "stop": step >= 6}

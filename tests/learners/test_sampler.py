@@ -15,7 +15,7 @@ from nsl.learners import ArraySampler, MixtureSampler
 
 def _episode(t, value, terminated=True):
     return SimpleNamespace(images=np.full((t, 4, 4, 3), value, np.uint8),
-                           states=np.stack([np.zeros(t), np.arange(t)], 1).astype(np.float32),
+                           states=np.stack([np.zeros(t), np.arange(t), *np.zeros((4, t))], 1).astype(np.float32),
                            actions=np.zeros((t, 6), np.float32),
                            rewards=np.eye(t, dtype=np.float32)[-1] * (value % 2), terminated=terminated)
 
