@@ -33,6 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--checkpoint-every", type=int, default=2000)
     p.add_argument("--no-augment", action="store_true", help="switch image augmentation off")
+    p.add_argument("--net", action="append", default=[], metavar="FIELD=VALUE",
+                   help="architecture for pre-training (a field of NetConfig; repeatable), e.g. --net pool=spatial "
+                        "--net hidden=32 --net action_dims=0,1,3; fine-tuning keeps the parent's")
     es = p.add_argument_group("early stopping (evaluates in the simulator every --eval-every steps)")
     es.add_argument("--eval-every", type=int, default=0, help="steps between evaluations; 0 = no early stopping")
     es.add_argument("--eval-episodes", type=int, default=50, help="episodes per evaluation on the target shift")
@@ -69,6 +72,37 @@ def _parse_data(specs: list[str]) -> list[tuple[str, float | None]]:
     return [(r, 1.0 / len(out) if w is None else w) for r, w in out]
 
 
+def _parse_net(specs: list[str]):
+    """``["pool=spatial", "hidden=32"]`` -> a NetConfig (None when empty); values take the field's type."""
+    if not specs:
+        return None
+    from dataclasses import fields
+
+    from nsl.errors import ConfigError
+    from nsl.learners import NetConfig
+
+    defaults = {f.name: getattr(NetConfig(), f.name) for f in fields(NetConfig)}
+    changes = {}
+    for spec in specs:
+        key, sep, value = spec.partition("=")
+        if not sep or key not in defaults:
+            raise ConfigError(f"--net {spec!r}: write FIELD=VALUE with FIELD one of {sorted(defaults)}")
+        default = defaults[key]
+        try:
+            if isinstance(default, tuple):
+                kind = type(default[0]) if default else int
+                changes[key] = tuple(kind(v) for v in value.split(",") if v.strip())
+            elif isinstance(default, bool):
+                if value.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(value)
+                changes[key] = value.lower() in ("true", "1")
+            else:
+                changes[key] = type(default)(value)
+        except ValueError:
+            raise ConfigError(f"--net {spec!r}: {value!r} is not a valid {key} (default {default!r})") from None
+    return NetConfig.from_dict({**NetConfig().to_dict(), **changes})
+
+
 def run(args: argparse.Namespace) -> int:
     from nsl import code_version, workspace
     from nsl.catalog import Catalog
@@ -80,6 +114,10 @@ def run(args: argparse.Namespace) -> int:
     if args.steps < 1:
         raise ConfigError(f"--steps {args.steps} must be at least 1")
     mix = _parse_data(args.data)
+    net = _parse_net(args.net)
+    if net is not None and args.init:
+        raise ConfigError("--net sets the architecture of a new network; with --init the parent's is kept "
+                          "(drop --net, or drop --init to pre-train)")
     cat = Catalog()
     uses = dataset_uses(cat, mix)  # validates the refs and registers unknown versions
     parent = resolve_init(cat, args.init) if args.init else None
@@ -106,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
     if args.eval_every:
         monitor = _monitor(args, run_dir, target_shift, held_out)
     result = train(config, sampler, run_dir, init_checkpoint=parent.path if parent else None, method=args.method,
-                   eval_fn=monitor)
+                   eval_fn=monitor, **({"net": net} if net is not None else {}))
     entry = _register(cat, args.name, result.checkpoint, parent, uses, target_shift)
     print(f"checkpoint ckpt:{args.name}@{result.step} ({entry.id[:12]}) -> {entry.path}")
     if monitor is not None:

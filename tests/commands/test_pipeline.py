@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -118,3 +119,18 @@ def test_bench_eval_reports_both_worker_counts(capsys):
     out = json.loads(capsys.readouterr().out)
     assert out["episodes"] == 16
     assert out["eval_episodes_per_s_1_worker"] > 0 and out["eval_episodes_per_s_2_workers"] > 0
+
+
+def test_pre_training_takes_an_architecture_and_refuses_bad_ones(pipeline, capsys):
+    assert run_cli("train", "--data", "grasp-base", "--steps", "2", "--name", "spatial-tiny",
+                   "--net", "pool=spatial", "--net", "hidden=16", "--net", "action_dims=0,1,3") == 0
+    with Catalog() as cat:
+        entry = cat.resolve_checkpoint("ckpt:spatial-tiny@latest")
+    arch = json.loads((Path(entry.path) / "config.json").read_text())["architecture"]
+    assert (arch["pool"], arch["hidden"], arch["action_dims"]) == ("spatial", 16, [0, 1, 3])
+    for extra, message in ((["--net", "poool=max"], "FIELD=VALUE"), (["--net", "hidden=wide"], "not a valid hidden"),
+                           (["--init", "ckpt:base-tiny", "--net", "hidden=16"], "parent's is kept")):
+        capsys.readouterr()
+        assert run_cli("train", "--data", "grasp-base", "--steps", "2", "--name", "x", *extra) == 2
+        err = capsys.readouterr().err.strip()
+        assert message in err and len(err.splitlines()) == 1, err
