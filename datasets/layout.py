@@ -157,6 +157,12 @@ class DatasetInfo:
         _check(self.data_path == DATA_PATH, p, f"data_path {self.data_path!r} is not {DATA_PATH!r}")
         _check(self.video_path is None, p, "videos are not used by nsl datasets (video_path must be null)")
         expected = features(self.image_size)
+        state = self.features.get(keys.OBS_STATE) or {}
+        if state.get("names") is not None and state.get("names") != keys.STATE_NAMES:
+            raise IncompatibleVersionError(
+                f"{p}: the dataset's gripper state is {state.get('names')}, but this nsl records "
+                f"{keys.STATE_NAMES} (environment v2); collect the dataset again with this nsl, "
+                "or set NSL_HOME to a new workspace")
         for k, ft in expected.items():
             got = self.features.get(k)
             _check(got is not None and got["dtype"] == ft["dtype"] and list(got["shape"]) == ft["shape"], p,

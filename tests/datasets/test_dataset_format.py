@@ -89,3 +89,7 @@ def test_info_json_mirror_validates_itself(make_synth):
     bad = {**info.to_dict(), "features": {**info.features, keys.ACTION: {"dtype": "float32", "shape": [7]}}}
     with pytest.raises(CorruptDataError, match="feature 'action'"):
         api.layout.DatasetInfo.from_dict(bad)
+    v1_state = {"dtype": "float32", "shape": [2], "names": ["gripper_opening", "wrist_height"]}
+    bad = {**info.to_dict(), "features": {**info.features, keys.OBS_STATE: v1_state}}
+    with pytest.raises(IncompatibleVersionError, match="collect the dataset again"):  # environment v1 data
+        api.layout.DatasetInfo.from_dict(bad)
