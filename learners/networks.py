@@ -12,6 +12,12 @@ per-candidate head) maps it to one logit::
 So maximising over many candidate actions (CEM) runs the trunk once per state
 and only the cheap head once per candidate: ``encode`` then ``score``.
 
+With ``NetConfig.pool="spatial"`` the context is a map instead of a vector
+(QT-Opt's tile-and-add merge): the state and each candidate's action are
+embedded, added at every position of the trunk's feature map (with coordinate
+planes), passed through a 1x1 convolution, and max-pooled over positions
+before the MLP.
+
 A :class:`QNetwork` holds one or more columns.  With one column it is a plain
 network.  With k > 1 it is a Progressive Neural Network (Rusu et al. 2016):
 columns 0..k-2 are frozen, and every layer of column k-1 after the first
@@ -30,6 +36,12 @@ from torch import nn
 from .config import NetConfig
 
 HEAD_PREFIXES = ("state_fc", "state_proj", "spatial_fc", "action_fc", "hidden_fcs", "out", "lateral.state", "lateral.hidden", "lateral.out")
+
+
+def coordinate_planes(n: int) -> torch.Tensor:
+    """(1, 2, n, n): x and y in [-1, 1] over an n x n grid (CoordConv's extra channels)."""
+    ramp = torch.linspace(-1.0, 1.0, n)
+    return torch.stack([ramp.view(1, n).expand(n, n), ramp.view(n, 1).expand(n, n)]).unsqueeze(0)
 
 
 class QColumn(nn.Module):
@@ -56,10 +68,7 @@ class QColumn(nn.Module):
             self.state_fc = nn.Conv2d(cfg.conv_channels[-1] + 2, h, 1)
             self.state_proj = nn.Linear(cfg.state_dim, h, bias=False)
             self.spatial_fc = nn.Conv2d(h, h, 1)
-            n = cfg.feature_size
-            ramp = torch.linspace(-1.0, 1.0, n)
-            self.register_buffer("coords", torch.stack([ramp.view(1, n).expand(n, n), ramp.view(n, 1).expand(n, n)])
-                                 .unsqueeze(0), persistent=False)
+            self.register_buffer("coords", coordinate_planes(cfg.feature_size), persistent=False)
         else:
             self.state_fc = nn.Linear(flat + cfg.state_dim, h)
         self.action_fc = nn.Linear(len(cfg.action_dims), h, bias=False)
@@ -123,9 +132,7 @@ class QNetwork(nn.Module):
             col.requires_grad_(False)
         n = cfg.image_size
         if cfg.coord_channels:
-            ramp = torch.linspace(-1.0, 1.0, n)
-            coords = torch.stack([ramp.view(1, n).expand(n, n), ramp.view(n, 1).expand(n, n)])
-            self.register_buffer("coords", coords.unsqueeze(0), persistent=False)
+            self.register_buffer("coords", coordinate_planes(n), persistent=False)
         else:
             self.coords = None
 
