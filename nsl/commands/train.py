@@ -165,7 +165,7 @@ def _monitor(args, run_dir: Path, target_shift: str, held_out):
     from nsl.eval import EarlyStopConfig, EarlyStopMonitor, simulator_scorer
 
     cfg = EarlyStopConfig(every=args.eval_every, episodes=args.eval_episodes, base_episodes=args.base_episodes,
-                          patience=args.patience, criterion=args.criterion)
+                          patience=args.patience, criterion=args.criterion, held_out=args.holdout)
     score_base = None
     if args.base_episodes:
         score_base = simulator_scorer(parse_shift("base"), cfg.eval_config(base=True, workers=args.workers))
