@@ -1,11 +1,12 @@
 """``GraspEnv``: vision-based bin grasping as a Gymnasium environment.
 
-Observation: ``{"image": (H, W, 3) uint8, "state": float32[6]}`` where state is
-the robot's proprioception: gripper opening in [0, 1], wrist height in [0, 1],
-wrist x and y in [-1, 1] (a fraction of the reach), and the sine and cosine of
-the wrist yaw.  A real arm reports these from its joint encoders; with them
-and a fixed camera a learner can relate the gripper to the objects it sees
-instead of inferring the gripper's pose from a few pixels.
+Observation: ``{"image": (H, W, 3) uint8, "state": float32[6]}``.  The image
+comes from ``EnvConfig.camera``: by default a camera on the wrist that looks
+between the fingers at the floor below them (it moves with the wrist, not
+with its yaw), or the fixed over-the-shoulder view of the bin.  The state is
+the robot's proprioception: gripper opening in [0, 1], wrist height in
+[0, 1], wrist x and y in [-1, 1] (a fraction of the reach), and the sine and
+cosine of the wrist yaw, as a real arm reports them from its encoders.
 
 Action (QT-Opt style, each in [-1, 1]): ``(dx, dy, dz, dyaw, close, terminate)``.
 
@@ -49,11 +50,11 @@ import mujoco  # noqa: E402,I001
 
 from . import objects as objlib  # noqa: E402
 from .scene import (  # noqa: E402
-    BIN_HALF, CAMERA_NAME, START_Z, FINGER_OPEN, WORKSPACE_HALF, WRIST_Z_RANGE, ObjectSpec, build_spec, finger_tip_offset,
+    BIN_HALF, CAMERAS, START_Z, FINGER_OPEN, WORKSPACE_HALF, WRIST_Z_RANGE, ObjectSpec, build_spec, finger_tip_offset,
 )
 from .shifts import ShiftSpec, parse_shift  # noqa: E402
 
-ENV_VERSION = "nsl-grasp-v2"  # v2: 6-d gripper state, camera framed on the bin
+ENV_VERSION = "nsl-grasp-v3"  # v2: 6-d gripper state, camera framed on the bin; v3: wrist camera, 7 cm jaw
 CONTROL_MODES = ("auto_descent", "full")
 ACTION_DIM = 6
 STATE_DIM = 6
@@ -66,6 +67,7 @@ class EnvConfig:
     shift: str = "base"  # shift spec, e.g. "harsh_lighting" or "harsh_lighting+checkerboard_backing@0.5"
     split: str = "train"  # object split: "train" (folders not ending in 0) or "test"
     image_size: int = 64  # square camera resolution in pixels
+    camera: str = "wrist"  # "wrist" (rides on the wrist, looks between the fingers) or "shoulder" (fixed, frames the bin)
     control: str = "auto_descent"  # "auto_descent" or "full" (see module doc)
     horizon: int = 0  # steps per episode; 0 means the mode's default (8 auto_descent, 20 full)
     min_objects: int = 1
@@ -81,6 +83,8 @@ class EnvConfig:
     def __post_init__(self) -> None:
         if self.control not in CONTROL_MODES:
             raise ConfigError(f"control mode {self.control!r} is unknown; use one of {CONTROL_MODES}")
+        if self.camera not in CAMERAS:
+            raise ConfigError(f"camera {self.camera!r} is unknown; use one of {CAMERAS}")
         if not isinstance(self.image_size, int) or not 16 <= self.image_size <= 512:
             raise ConfigError(f"image_size {self.image_size!r} is out of range; use 16..512 pixels (64 is standard)")
         if not 1 <= self.min_objects <= self.max_objects <= 5:
@@ -342,7 +346,7 @@ class GraspEnv(gym.Env):
         return np.clip(np.array([opening, height, x, y, math.sin(yaw), math.cos(yaw)], dtype=np.float32), -1.0, 1.0)
 
     def render(self) -> np.ndarray:
-        return self._renderer.render(self.model, self.data, CAMERA_NAME)
+        return self._renderer.render(self.model, self.data, self.config.camera)
 
     def _info(self, success: bool) -> dict[str, Any]:
         return {"success": bool(success), "step": self._t, "num_objects": len(self._objects)}

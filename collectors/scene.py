@@ -3,8 +3,10 @@
 A table with a 30 cm bin, 1-5 procedural objects, and a parallel-jaw gripper
 on a visible wrist and arm link.  The gripper is driven in Cartesian space by
 position actuators on three slides (x, y, z of the wrist) and a hinge (yaw);
-two slide fingers close along the gripper's local x axis.  A fixed
-over-the-shoulder camera frames the bin.
+two slide fingers close along the gripper's local x axis (7 cm apart when
+open).  Two cameras: ``wrist`` rides on the wrist body, behind the palm, and
+looks between the fingers at the floor below them; ``shoulder`` is fixed and
+frames the whole bin.
 
 Everything a shift or the environment reads later is named.  Grasp physics
 follow what made grasps reliable in the prototype measured on this machine:
@@ -30,12 +32,15 @@ BIN_WALL_T = 0.01
 FINGER_HALF = (0.006, 0.014, 0.03)  # finger box half sizes: thickness, width, length
 PALM_Z = -0.035  # palm centre below the wrist
 FINGER_TOP = -0.045  # where fingers attach, below the wrist
-FINGER_OPEN = 0.05  # each finger's distance from centre when open (10 cm opening)
+FINGER_OPEN = 0.035  # each finger's distance from centre when open (7 cm opening)
 WRIST_Z_RANGE = (0.095, 0.34)  # wrist height limits
 START_Z = 0.25  # wrist height at the start of an episode
 WORKSPACE_HALF = 0.13  # wrist x/y limits
 TIMESTEP = 0.002
-CAMERA_NAME = "shoulder"
+WRIST_CAM_POS = (0.0, -0.085, -0.05)  # wrist camera, in the wrist frame
+WRIST_CAM_TARGET = (0.0, 0.0, -0.13)  # the point it looks at: the floor below the fingers at the last step
+WRIST_CAM_FOVY = 65.0
+CAMERAS = ("wrist", "shoulder")  # names of the scene's cameras; EnvConfig.camera picks one
 MAX_OBJECTS = 5
 
 
@@ -112,10 +117,10 @@ def build_spec(objects: list[ObjectSpec], shift: ShiftSpec, image_size: int = 64
     # Framed on the bin, so that at 64x64 an object covers tens of pixels rather than a few; the
     # gripper leaves the top of the frame when it is high and near the back wall.
     cam_pos = np.array([0.0, -0.20, 0.34])
-    world.add_camera(name=CAMERA_NAME, pos=cam_pos.tolist(), quat=_look_at_quat(cam_pos, np.array([0.0, 0.01, 0.0])),
+    world.add_camera(name="shoulder", pos=cam_pos.tolist(), quat=_look_at_quat(cam_pos, np.array([0.0, 0.01, 0.0])),
                      fovy=48.0)
 
-    _add_gripper(spec)
+    _add_gripper(spec, image_size)
     for i, obj in enumerate(objects):
         _add_object(spec, i, obj)
     for i in range(len(objects), MAX_OBJECTS):
@@ -127,7 +132,7 @@ def build_spec(objects: list[ObjectSpec], shift: ShiftSpec, image_size: int = 64
     return spec
 
 
-def _add_gripper(spec: mujoco.MjSpec) -> None:
+def _add_gripper(spec: mujoco.MjSpec, image_size: int = 64) -> None:
     slide, hinge = mujoco.mjtJoint.mjJNT_SLIDE, mujoco.mjtJoint.mjJNT_HINGE
     box, cyl, cap = mujoco.mjtGeom.mjGEOM_BOX, mujoco.mjtGeom.mjGEOM_CYLINDER, mujoco.mjtGeom.mjGEOM_CAPSULE
     metal, dark = [0.75, 0.75, 0.78, 1], [0.15, 0.15, 0.17, 1]
@@ -143,6 +148,13 @@ def _add_gripper(spec: mujoco.MjSpec) -> None:
                    contype=0, conaffinity=0, mass=0.4)
     wrist.add_geom(name="arm_link", type=cap, fromto=[0, 0, 0.015, 0.16, 0.22, 0.40], size=[0.022, 0, 0],
                    rgba=[0.9, 0.55, 0.1, 1], contype=0, conaffinity=0, mass=0.01)
+
+    # The wrist camera rides on the wrist (it moves with x, y and z but does not turn with the yaw), behind
+    # the palm and tilted forward to look between the fingers at the floor below them.  World-frame motions
+    # then shift the picture the same way wherever the gripper is, and the fingers stay in view.
+    cam_pos = np.array(WRIST_CAM_POS)
+    wrist.add_camera(name="wrist", pos=cam_pos.tolist(), quat=_look_at_quat(cam_pos, np.array(WRIST_CAM_TARGET)),
+                     fovy=WRIST_CAM_FOVY)
 
     hand = wrist.add_body(name="hand", pos=[0, 0, 0], gravcomp=1.0)
     hand.add_joint(name="wrist_yaw", type=hinge, axis=[0, 0, 1], range=[-math.pi, math.pi], limited=True,

@@ -33,6 +33,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--checkpoint-every", type=int, default=2000)
     p.add_argument("--no-augment", action="store_true", help="switch image augmentation off")
+    p.add_argument("--crop", type=int, default=None, metavar="PIXELS",
+                   help="random-shift augmentation in pixels (default 4; 0 keeps the colour jitter only)")
     p.add_argument("--net", action="append", default=[], metavar="FIELD=VALUE",
                    help="architecture for pre-training (a field of NetConfig; repeatable), e.g. --net pool=spatial "
                         "--net hidden=32 --net action_dims=0,1,3; fine-tuning keeps the parent's")
@@ -121,7 +123,10 @@ def run(args: argparse.Namespace) -> int:
     cat = Catalog()
     uses = dataset_uses(cat, mix)  # validates the refs and registers unknown versions
     parent = resolve_init(cat, args.init) if args.init else None
+    for ref, _ in mix[:-1]:
+        _check_env_version(api.open_view(ref))
     target_view = api.open_view(mix[-1][0])
+    _check_env_version(target_view)
     target_shift = args.target_shift or _view_shift(target_view)
 
     sources = [(ref, w) for ref, w in mix]
@@ -133,7 +138,8 @@ def run(args: argparse.Namespace) -> int:
 
     config = TrainConfig(steps=args.steps, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
                          checkpoint_every=args.checkpoint_every, eval_every=args.eval_every,
-                         **({"augment_crop": 0, "augment_colour": 0.0} if args.no_augment else {}))
+                         **({"augment_crop": 0, "augment_colour": 0.0} if args.no_augment else {}),
+                         **({"augment_crop": args.crop} if args.crop is not None and not args.no_augment else {}))
     run_dir = workspace.runs_dir() / args.name
     run_dir.mkdir(parents=True, exist_ok=True)
     workspace.atomic_write_json(run_dir / "command.json", {
@@ -153,6 +159,19 @@ def run(args: argparse.Namespace) -> int:
         print(f"best by evaluation: ckpt:{args.name}@{best.step}; curve in {run_dir / 'curve.csv'}; "
               f"plot it with `nsl report {run_dir}`")
     return 0
+
+
+def _check_env_version(view) -> None:
+    """Refuse data from an older simulator: its pictures and physics differ from what evaluation runs."""
+    from nsl.collectors import ENV_VERSION
+    from nsl.errors import IncompatibleVersionError
+
+    for c in view.version.provenance.get("collections", []):
+        got = c.get("spec", {}).get("env", {}).get("env_version")
+        if got is not None and got != ENV_VERSION:
+            raise IncompatibleVersionError(
+                f"dataset {view.version.ref} was collected in environment {got}, but this nsl simulates "
+                f"{ENV_VERSION} (wrist camera, 7 cm jaw); collect it again, or set NSL_HOME to a new workspace")
 
 
 def _view_shift(view) -> str:

@@ -113,6 +113,23 @@ def test_observation_layout_and_configurable_size():
     assert 1 <= info["num_objects"] <= 5
 
 
+def test_wrist_camera_rides_with_the_gripper_and_the_shoulder_camera_stays():
+    """The wrist camera moves with the wrist (not with its yaw); the shoulder camera stays where it is."""
+    env = GraspEnv(EnvConfig(min_objects=1, max_objects=1))
+    env.reset(seed=3)
+    m, d = env.model, env.data
+    wrist_cam, shoulder_cam = m.camera("wrist").id, m.camera("shoulder").id
+    cams0, wrist0, picture0 = d.cam_xpos.copy(), env.privileged_state()["gripper"], env.render().astype(np.float64)
+    env.step(np.array([1.0, -1.0, 0.0, 1.0, -1.0, -1.0]))  # 3 cm along x and -y, one descent step, a yaw turn
+    moved = env.privileged_state()["gripper"][:3] - wrist0[:3]
+    assert np.linalg.norm(moved[:2]) > 0.03
+    assert d.cam_xpos[wrist_cam] - cams0[wrist_cam] == pytest.approx(moved, abs=1e-3)
+    assert d.cam_xpos[shoulder_cam] == pytest.approx(cams0[shoulder_cam])
+    assert np.abs(env.render().astype(np.float64) - picture0).mean() > 5  # the bin slides through the picture
+    env.close()
+    assert EnvConfig().camera == "wrist" and EnvConfig().to_dict()["env_version"] == "nsl-grasp-v3"
+
+
 @pytest.mark.parametrize("kwargs,match", [
     ({"image_size": 0}, "image_size 0 is out of range"),
     ({"shift": "bogus"}, "unknown shift 'bogus'"),
@@ -120,6 +137,7 @@ def test_observation_layout_and_configurable_size():
     ({"control": "joystick"}, "control mode 'joystick' is unknown"),
     ({"horizon": 30}, "at most 20 steps"),
     ({"split": "val"}, "split 'val'"),
+    ({"camera": "overhead"}, "camera 'overhead' is unknown"),
 ])
 def test_bad_configs_get_one_line_errors(kwargs, match):
     with pytest.raises(Exception, match=match) as e:

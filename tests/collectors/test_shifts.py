@@ -11,11 +11,11 @@ from nsl.errors import ConfigError, IncompatibleVersionError, UnknownReferenceEr
 
 @pytest.fixture(scope="module")
 def frames():
-    """First frames of the same four scenes under each shift."""
+    """First frames of the same four scenes under each shift, from the fixed shoulder camera (whole bin)."""
     out = {}
     for name in ["base", "harsh_lighting", "checkerboard_backing", "transparent_objects",
                  "harsh_lighting+checkerboard_backing"]:
-        env = GraspEnv(EnvConfig(shift=name))
+        env = GraspEnv(EnvConfig(shift=name, camera="shoulder"))
         out[name] = np.stack([env.reset(seed=s)[0]["image"] for s in range(4)]).astype(np.float64)
         env.close()
     return out
@@ -37,6 +37,20 @@ def test_checkerboard_adds_black_and_white_squares(frames):
     assert checker.std() > 2 * base.std()
     assert (checker.mean(-1) < 40).mean() > 0.2 and (checker.mean(-1) > 200).mean() > 0.2
     assert (base.mean(-1) < 40).mean() < 0.05 and (base.mean(-1) > 200).mean() < 0.05
+
+
+def test_the_wrist_camera_sees_the_shifts_too():
+    """The default wrist camera looks at the floor below the fingers: the checkerboard and the light show there."""
+    def first_frames(shift):
+        env = GraspEnv(EnvConfig(shift=shift))
+        out = np.stack([env.reset(seed=s)[0]["image"] for s in range(4)]).astype(np.float64)
+        env.close()
+        return out
+
+    base, checker, harsh = first_frames("base"), first_frames("checkerboard_backing"), first_frames("harsh_lighting")
+    floor = np.s_[:, 40:, :]  # the lower part of the picture: the floor ahead of the finger tips
+    assert checker[floor].std() > 2 * base[floor].std()
+    assert harsh.mean() > base.mean() + 15
 
 
 def test_shifts_compose(frames):

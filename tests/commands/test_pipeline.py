@@ -134,3 +134,24 @@ def test_pre_training_takes_an_architecture_and_refuses_bad_ones(pipeline, capsy
         assert run_cli("train", "--data", "grasp-base", "--steps", "2", "--name", "x", *extra) == 2
         err = capsys.readouterr().err.strip()
         assert message in err and len(err.splitlines()) == 1, err
+
+
+def test_training_records_the_crop_and_refuses_data_from_an_older_environment(pipeline, capsys):
+    assert run_cli("train", "--data", "grasp-base", "--steps", "2", "--name", "crop-tiny", "--crop", "2") == 0
+    with Catalog() as cat:
+        entry = cat.resolve_checkpoint("ckpt:crop-tiny@latest")
+    training = json.loads((Path(entry.path) / "config.json").read_text())["training"]
+    assert (training["augment_crop"], training["augment_colour"]) == (2, 0.1)
+    # A copy of the base data whose provenance says it came from environment v2 (shoulder camera, 10 cm jaw).
+    src = workspace.datasets_dir() / "grasp-base"
+    old = workspace.datasets_dir() / "grasp-old"
+    import shutil
+    shutil.copytree(src, old)
+    for prov in old.glob("v*/meta/*.json"):
+        text = prov.read_text()
+        if "nsl-grasp-v3" in text:
+            prov.write_text(text.replace("nsl-grasp-v3", "nsl-grasp-v2"))
+    capsys.readouterr()
+    assert run_cli("train", "--data", "grasp-old", "--steps", "2", "--name", "old-tiny") == 2
+    err = capsys.readouterr().err.strip()
+    assert "nsl-grasp-v2" in err and "collect it again" in err and len(err.splitlines()) == 1, err
