@@ -46,7 +46,8 @@ def collect_episodes(config: EnvConfig, make_policy: PolicyFactory, indices: Ite
         raise ConfigError(f"workers {workers} must be at least 1")
     chunks = [indices[k:k + batch] for k in range(0, len(indices), batch)]
     if workers == 1:
-        _init_worker(config, make_policy, batch, seed)
+        # In the caller's process: no thread limits (a trainer evaluating in-process keeps its threads).
+        _WORKER.update(envs=make_envs(config, batch), policy=make_policy(), seed=seed)
         try:
             for chunk in chunks:
                 yield from _run_chunk(chunk)

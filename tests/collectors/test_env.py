@@ -42,6 +42,23 @@ def test_same_seed_bit_identical_across_processes():
     assert _digest(run_episodes(make_envs(EnvConfig(), 1), scripted_policy("oracle:0.5"), range(3), seed=43)) != here
 
 
+def test_in_process_collection_leaves_the_callers_torch_threads_alone():
+    """A trainer that evaluates with one worker runs it in its own process; it must keep its threads."""
+    import functools
+
+    import torch
+
+    from nsl.collectors import collect_episodes
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        eps = list(collect_episodes(EnvConfig(), functools.partial(scripted_policy, "random"), range(2), seed=0))
+        assert len(eps) == 2 and torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)
+
+
 def test_batched_episodes_equal_single_ones():
     one = list(run_episodes(make_envs(EnvConfig(), 1), scripted_policy("oracle:0.5"), range(4), seed=5))
     four = list(run_episodes(make_envs(EnvConfig(), 4), scripted_policy("oracle:0.5"), range(4), seed=5))
