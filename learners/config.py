@@ -141,6 +141,8 @@ class TrainConfig:
     polyak: float = 0.995  # target network 1: theta_bar <- polyak * theta_bar + (1 - polyak) * theta, every step
     lag_period: int = 1000  # target network 2: a copy of the online network, refreshed every lag_period steps
     cem: CemConfig = field(default_factory=CemConfig)  # action maximisation for the Bellman target
+    conservative: float = 0.0  # weight of scoring uniform random actions as failures (keeps unseen actions down); 0 disables
+    conservative_samples: int = 16  # uniform random actions per state for that term
     augment_crop: int = 4  # random-shift augmentation: pad by this many pixels and crop back; 0 disables
     augment_colour: float = 0.1  # colour jitter strength (brightness, contrast, per-channel gain); 0 disables
     seed: int = 0
@@ -163,6 +165,9 @@ class TrainConfig:
                               f"(got {self.lag_period}, {self.log_every}, {self.checkpoint_every}, {self.eval_every})")
         if self.augment_crop < 0 or self.augment_colour < 0 or self.grad_clip < 0 or self.weight_decay < 0:
             raise ConfigError("augment_crop, augment_colour, grad_clip and weight_decay must be non-negative")
+        if self.conservative < 0 or self.conservative_samples < 1:
+            raise ConfigError(f"conservative {self.conservative} must be >= 0 and conservative_samples "
+                              f"{self.conservative_samples} >= 1")
         if self.keep_trainer_state < 1:
             raise ConfigError(f"keep_trainer_state {self.keep_trainer_state} must be at least 1 (resume needs one)")
 

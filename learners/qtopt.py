@@ -10,6 +10,17 @@ logit) against the clipped double-Q target of QT-Opt::
 and ``Q_lagged`` a copy of the online weights refreshed every
 ``lag_period`` steps.  Q values are probabilities of success (sigmoids), so a
 target is in [0, 1] for rewards in {0, 1} and gamma <= 1.
+
+Offline, CEM's maximum in the target finds actions the data never tried,
+whose values nothing corrects, and the optimism spreads backwards through the
+episode.  ``TrainConfig.conservative`` (alpha) adds a conservative term in the
+spirit of CQL (Kumar et al. 2020), written for a probability-valued Q: uniform
+random actions are scored as failures with weight alpha::
+
+    loss += alpha * mean_{s, a ~ U} BCE(logit(s, a), 0)
+
+(CQL's own logsumexp form raises the data actions' values while it lowers the
+others'; with a sigmoid Q that inflated every target towards 1 here.)
 """
 
 from __future__ import annotations
@@ -96,8 +107,18 @@ def update(learner: Learner, batch: dict[str, torch.Tensor], cfg: TrainConfig, s
         target, next_value = bellman_target(learner.polyak, learner.lagged, next_image, batch[keys.NEXT_OBS_STATE],
                                             reward, done, cfg.gamma, cfg.cem, noise)
 
-    logits = net(image, batch[keys.OBS_STATE], action)
-    loss = F.binary_cross_entropy_with_logits(logits, target)
+    if cfg.conservative > 0:
+        # The data's action first, then uniform random candidates; one trunk pass for all of them.
+        rand = torch.rand(len(reward), cfg.conservative_samples, action.shape[1], generator=gen) * 2.0 - 1.0
+        all_logits = net.score(net.encode(image, batch[keys.OBS_STATE]), torch.cat([action.unsqueeze(1), rand], 1))
+        logits = all_logits[:, 0]
+        rand_logits = all_logits[:, 1:]
+        conservative = F.binary_cross_entropy_with_logits(rand_logits, torch.zeros_like(rand_logits))
+    else:
+        logits = net(image, batch[keys.OBS_STATE], action)
+        conservative = logits.new_zeros(())
+    td_loss = F.binary_cross_entropy_with_logits(logits, target)
+    loss = td_loss + cfg.conservative * conservative
     learner.optimizer.zero_grad(set_to_none=True)
     loss.backward()
     params = net.trainable_parameters()
@@ -111,10 +132,10 @@ def update(learner: Learner, batch: dict[str, torch.Tensor], cfg: TrainConfig, s
     q = torch.sigmoid(logits.detach())
     live = done < 0.5
     stats = torch.stack([
-        loss.detach(), grad_norm, q.mean(), q.min(), q.max(), target.mean(),
+        td_loss.detach(), conservative.detach(), grad_norm, q.mean(), q.min(), q.max(), target.mean(),
         next_value[live].mean() if live.any() else next_value.new_tensor(0.0),
     ]).tolist()
-    names = ["losses/q_loss", "losses/grad_norm", "q/mean", "q/min", "q/max", "q/target_mean", "q/next_value_mean"]
+    names = ["losses/q_loss", "losses/conservative", "losses/grad_norm", "q/mean", "q/min", "q/max", "q/target_mean", "q/next_value_mean"]
     return dict(zip(names, stats))
 
 

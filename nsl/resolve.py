@@ -85,5 +85,4 @@ def register_shipped_base(cat):
     config = json.loads((folder / "config.json").read_text())
     entry = cat.save_checkpoint("base", int(config.get("step", 0)), folder / "model.safetensors", config,
                                 shift="base", card_info={"note": "shipped with nsl"})
-    cat.tag("base", entry.id)
-    return entry
+    return entry  # registered under the name "base", so ckpt:base resolves to it from now on

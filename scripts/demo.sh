@@ -19,18 +19,18 @@ $NSL collect --shift base --episodes 600 --policy oracle:1.0 --dataset demo-base
 $NSL collect --shift harsh_lighting --episodes 100 --policy oracle:1.0 --dataset demo-harsh --workers $W --batch 4
 $NSL dataset tiers demo-harsh --sizes 25,50,100
 
-echo "== 4. Pre-train a Q-function offline on the base data (short: a demo, not the shipped base policy)"
-$NSL train --data demo-base --steps 1500 --name demo-base
+echo "== 4. Pre-train a Q-function offline on the base data (short, to show the command; the shipped base is next)"
+$NSL train --data demo-base --steps 1000 --name demo-base
 
-echo "== 5. Fine-tune it on harsh lighting, 50/50 with base data, with early stopping on simulator success"
-$NSL train --data demo-base=0.5 --data demo-harsh=0.5 --init ckpt:demo-base --steps 900 --name demo-harsh \
+echo "== 5. Fine-tune the shipped base policy (ckpt:base) on harsh lighting, 50/50 with base data, early stopping"
+$NSL train --data demo-base=0.5 --data demo-harsh=0.5 --init ckpt:base --steps 900 --name demo-harsh \
   --eval-every 300 --eval-episodes 20 --base-episodes 20 --patience 2 --workers $W
 
-echo "== 6. Evaluate the pre-trained and the fine-tuned checkpoints on the same scenes (paired)"
-$NSL eval --checkpoint ckpt:demo-base@latest,ckpt:demo-harsh@best --shift base,harsh_lighting --episodes 50 --workers $W
+echo "== 6. Evaluate the base and the fine-tuned checkpoints on the same scenes (paired)"
+$NSL eval --checkpoint ckpt:base,ckpt:demo-harsh@best --shift base,harsh_lighting --episodes 50 --workers $W
 
-echo "== 7. A two-stage continual run: harsh lighting, then transparent objects"
-$NSL continual --sequence harsh_lighting,transparent_objects --init ckpt:demo-base@latest --base-data demo-base \
+echo "== 7. A two-stage continual run from the base policy: harsh lighting, then transparent objects"
+$NSL continual --sequence harsh_lighting,transparent_objects --init ckpt:base --base-data demo-base \
   --episodes 60 --steps 300 --eval-episodes 30 --workers $W --name demo-continual
 
 echo "== 8. Lineage of the last continual stage, and reports"

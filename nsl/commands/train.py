@@ -33,6 +33,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--checkpoint-every", type=int, default=2000)
     p.add_argument("--no-augment", action="store_true", help="switch image augmentation off")
+    p.add_argument("--conservative", type=float, default=0.0, metavar="ALPHA",
+                   help="CQL weight that keeps offline Q values of unseen actions down (default 0 = plain QT-Opt)")
     p.add_argument("--crop", type=int, default=None, metavar="PIXELS",
                    help="random-shift augmentation in pixels (default 4; 0 keeps the colour jitter only)")
     p.add_argument("--net", action="append", default=[], metavar="FIELD=VALUE",
@@ -138,6 +140,7 @@ def run(args: argparse.Namespace) -> int:
 
     config = TrainConfig(steps=args.steps, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
                          checkpoint_every=args.checkpoint_every, eval_every=args.eval_every,
+                         conservative=args.conservative,
                          **({"augment_crop": 0, "augment_colour": 0.0} if args.no_augment else {}),
                          **({"augment_crop": args.crop} if args.crop is not None and not args.no_augment else {}))
     run_dir = workspace.runs_dir() / args.name

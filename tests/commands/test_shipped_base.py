@@ -1,0 +1,60 @@
+"""The base checkpoint that ships in ``nsl/assets/base``: it loads, resolves as ``ckpt:base``, records how it
+was made, and (slow) grasps as well as the README says while every shift hurts it."""
+
+from __future__ import annotations
+
+import json
+import shlex
+from pathlib import Path
+
+import pytest
+
+import nsl
+from nsl.catalog import Catalog
+from nsl.collectors import ENV_VERSION
+from nsl.learners import load_checkpoint
+from tests.conftest import run_cli
+
+ASSET = Path(nsl.__file__).parent / "assets" / "base"
+README = Path(__file__).resolve().parents[2] / "README.md"
+SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "pretrain_base.sh"
+
+
+def test_shipped_base_loads_and_records_its_recipe():
+    ckpt = load_checkpoint(ASSET)
+    cfg = ckpt.config
+    assert cfg["method"] == "scratch" and cfg["parent"] is None
+    sources = cfg["data"]["sources"]
+    assert sum(s["episodes"] for s in sources) <= 10_000  # the issue's data budget
+    assert all(s["ref"].startswith("grasp-base-") for s in sources)
+    assert 0 < cfg["step"] <= cfg["training"]["steps"]
+    command = json.loads((ASSET / "command.json").read_text())
+    # The reproduce script runs exactly the recorded training command.
+    train_line = " ".join(shlex.quote(a) for a in command["argv"][1:])
+    assert train_line in SCRIPT.read_text().replace("\\\n", "").replace("  ", " ")
+    assert command["data"] and all(d["hash"].startswith("sha256:") for d in command["data"])
+    assert ENV_VERSION in (ASSET / "env_version.txt").read_text()
+
+
+def test_ckpt_base_falls_back_to_the_shipped_checkpoint_and_is_catalogued(capsys):
+    assert run_cli("eval", "--checkpoint", "ckpt:base", "--episodes", "4", "--batch", "4", "--json") == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["results"]["base"]["episodes"] == 4
+    with Catalog() as cat:
+        entry = cat.resolve_checkpoint("ckpt:base")
+    assert entry.name == "base"
+    assert (Path(entry.path) / "model.safetensors").read_bytes() == (ASSET / "model.safetensors").read_bytes()
+
+
+@pytest.mark.slow
+def test_shipped_base_grasps_well_and_every_shift_hurts(capsys):
+    """What the README states: about 70% on 200 unseen test scenes (the issue's 80% is not reached yet),
+    and each shift at least 15 points lower (the issue's bar)."""
+    assert run_cli("eval", "--checkpoint", "ckpt:base", "--shift", "all", "--episodes", "200", "--workers", "2",
+                   "--seed", "2000", "--json") == 0
+    results = json.loads(capsys.readouterr().out)["results"]
+    base = results["base"]["success_rate"]
+    assert base >= 0.64, results  # README: 70% [64-76] with these seeds
+    for shift, r in results.items():
+        if shift != "base":
+            assert r["success_rate"] <= base - 0.15 + 1e-9, (shift, r, base)
