@@ -34,7 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--checkpoint-every", type=int, default=2000)
     p.add_argument("--no-augment", action="store_true", help="switch image augmentation off")
     p.add_argument("--conservative", type=float, default=0.0, metavar="ALPHA",
-                   help="CQL weight that keeps offline Q values of unseen actions down (default 0 = plain QT-Opt)")
+                   help="weight of scoring random actions as failures, which keeps offline Q values of unseen "
+                        "actions down (default 0 = plain QT-Opt)")
     p.add_argument("--crop", type=int, default=None, metavar="PIXELS",
                    help="random-shift augmentation in pixels (default 4; 0 keeps the colour jitter only)")
     p.add_argument("--net", action="append", default=[], metavar="FIELD=VALUE",
@@ -125,10 +126,10 @@ def run(args: argparse.Namespace) -> int:
     cat = Catalog()
     uses = dataset_uses(cat, mix)  # validates the refs and registers unknown versions
     parent = resolve_init(cat, args.init) if args.init else None
-    for ref, _ in mix[:-1]:
-        _check_env_version(api.open_view(ref))
-    target_view = api.open_view(mix[-1][0])
-    _check_env_version(target_view)
+    views = [api.open_view(ref) for ref, _ in mix]
+    for view in views:
+        _check_env_version(view)
+    target_view = views[-1]
     target_shift = args.target_shift or _view_shift(target_view)
 
     sources = [(ref, w) for ref, w in mix]
