@@ -10,6 +10,17 @@ Transitions: frame ``t`` of an episode with its successor ``t + 1``.  The last
 frame of a terminated episode is a terminal transition (done = 1; its next
 observation is the frame itself and must be ignored); the last frame of a
 truncated episode has no successor and is left out.
+
+With ``n_step > 1`` a transition spans up to n frames of its episode
+(Sutton & Barto's n-step return, taken along the data's own actions)::
+
+    reward   = r_t + gamma r_{t+1} + ... + gamma^(k-1) r_{t+k-1}
+    next     = frame t + k             (k <= n; fewer where the episode ends)
+    discount = gamma^k                 (the learner's bootstrap factor)
+    done     = the episode terminated within those k frames
+
+and batches carry ``keys.DISCOUNT``.  A truncated episode's chain stops at its
+last frame that has a successor.
 """
 
 from __future__ import annotations
@@ -77,11 +88,41 @@ def image_cache(version: DatasetVersion, progress: bool = False) -> np.ndarray:
     return arr
 
 
+def n_step_returns(reward: np.ndarray, done: np.ndarray, has_next: np.ndarray, start: np.ndarray, n: int,
+                   gamma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """For transitions starting at frames ``start``: (return, next frame, gamma^k, terminated), all (len(start),).
+
+    ``reward``, ``done`` and ``has_next`` are per frame of episodes stored back to back; ``has_next``
+    marks the frames that start a transition (all but a truncated episode's last frame).  Vectorised over
+    transitions, one pass per step of the chain.
+    """
+    ret = np.zeros(len(start))
+    disc = np.ones(len(start))
+    cur, nxt = start.copy(), start.copy()
+    term = np.zeros(len(start), bool)
+    active = np.ones(len(start), bool)
+    for k in range(n):
+        ret[active] += disc[active] * reward[cur[active]]
+        disc[active] *= gamma
+        ends = active & done[cur]
+        term |= ends
+        nxt[ends] = cur[ends]  # a terminal transition's next observation is never used
+        active &= ~ends
+        succ = np.where(active, cur + 1, cur)  # an active frame is no episode's last: its successor is t + 1
+        go_on = active & has_next[succ] if k + 1 < n else np.zeros_like(active)
+        stop = active & ~go_on
+        nxt[stop] = succ[stop]
+        cur = np.where(go_on, succ, cur)
+        active = go_on
+    return ret, nxt, disc, term
+
+
 class TransitionSource:
     """The transitions of one view: index arrays into the image cache plus in-memory numeric columns."""
 
-    def __init__(self, view: DatasetView, verify: bool = True):
+    def __init__(self, view: DatasetView, verify: bool = True, n_step: int = 1, gamma: float = 1.0):
         self.view = view
+        self.n_step, self.gamma = n_step, gamma
         if verify:
             view.check()
         cols = view.read_columns((keys.OBS_STATE, keys.ACTION, keys.REWARD, keys.DONE, keys.INDEX, keys.EPISODE_INDEX))
@@ -97,12 +138,13 @@ class TransitionSource:
         keep = ~last | done  # a truncated (or unfinished) episode's last frame has no successor
         local = np.flatnonzero(keep)
         self.obs_index = first + local  # into the image cache (global frame index)
-        self.next_index = np.where(last[local], first + local, first + local + 1)
         self._first = first
         self.states = cols[keys.OBS_STATE].astype(np.float32)  # per frame of the view (index - first)
         self.actions = cols[keys.ACTION].astype(np.float32)[local]  # per transition
-        self.reward = cols[keys.REWARD].astype(np.float32)[local]
-        self.done = done[local].astype(np.float32)
+        reward, nxt, discount, term = n_step_returns(cols[keys.REWARD].astype(np.float64), done, keep, local,
+                                                     n_step, gamma)
+        self.next_index = first + nxt
+        self.reward, self.discount, self.done = reward.astype(np.float32), discount.astype(np.float32), term.astype(np.float32)
 
     def __len__(self) -> int:
         return len(self.obs_index)
@@ -118,6 +160,8 @@ class TransitionSource:
         np.take(self.reward, j, out=out[keys.REWARD][sl])
         np.take(self.done, j, out=out[keys.DONE][sl])
         np.take(self.actions, j, axis=0, out=out[keys.ACTION][sl])
+        if keys.DISCOUNT in out:
+            np.take(self.discount, j, out=out[keys.DISCOUNT][sl])
 
     def describe(self) -> dict[str, Any]:
         return {**self.view.describe(), "transitions": len(self)}
@@ -142,6 +186,10 @@ class Sampler:
         w = np.asarray(weights, dtype=np.float64)
         self.weights = w / w.sum()
         self.image_size = sizes.pop()
+        steps = {(s.n_step, s.gamma) for s in self.sources}
+        if len(steps) != 1:
+            raise ConfigError(f"sources disagree on (n_step, gamma): {sorted(steps)}; build them with the same values")
+        self.n_step, self.gamma = steps.pop()
 
     def __len__(self) -> int:
         return sum(len(s) for s in self.sources)
@@ -155,6 +203,8 @@ class Sampler:
             keys.ACTION: np.empty((b, len(keys.ACTION_NAMES)), np.float32),
             keys.REWARD: np.empty(b, np.float32), keys.DONE: np.empty(b, np.float32),
         }
+        if self.n_step > 1:
+            out[keys.DISCOUNT] = np.empty(b, np.float32)
         counts = rng.multinomial(b, self.weights) if len(self.sources) > 1 else [b]
         at = 0
         for src, k in zip(self.sources, counts):
@@ -165,18 +215,25 @@ class Sampler:
 
     def describe(self) -> dict[str, Any]:
         return {"transitions": len(self), "image_size": self.image_size,
+                **({"n_step": self.n_step, "gamma": self.gamma} if self.n_step > 1 else {}),
                 "sources": [{**s.describe(), "weight": float(w)} for s, w in zip(self.sources, self.weights)]}
 
 
 SourceSpec = str | DatasetView
 
 
-def make_sampler(sources: SourceSpec | Sequence[tuple[SourceSpec, float]], verify: bool = True) -> Sampler:
+def make_sampler(sources: SourceSpec | Sequence[tuple[SourceSpec, float]], verify: bool = True, n_step: int = 1,
+                 gamma: float | None = None) -> Sampler:
     """A sampler over ``[(ref or view, weight), ...]`` (or a single ref/view with weight 1).
 
     ``verify`` re-hashes the data files each source reads and refuses damaged
-    ones (CorruptDataError names the file).
+    ones (CorruptDataError names the file).  ``n_step > 1`` gives n-step
+    transitions discounted by ``gamma`` (see the module docstring).
     """
+    if not (isinstance(n_step, int) and n_step >= 1):
+        raise ConfigError(f"n_step {n_step!r} must be a whole number >= 1")
+    if n_step > 1 and (gamma is None or not 0 <= gamma <= 1):
+        raise ConfigError(f"n-step transitions need the discount gamma in [0, 1]; got {gamma!r}")
     pairs = [(sources, 1.0)] if isinstance(sources, (str, DatasetView)) else list(sources)
     if not pairs:
         raise ConfigError("make_sampler needs at least one (dataset, weight) pair, e.g. [('grasp-base', 0.5), "
@@ -184,7 +241,8 @@ def make_sampler(sources: SourceSpec | Sequence[tuple[SourceSpec, float]], verif
     for ref, w in pairs:
         if not (isinstance(w, (int, float)) and w > 0 and np.isfinite(w)):
             raise ConfigError(f"weight {w!r} of {ref} must be a positive number")
-    built = [TransitionSource(open_view(ref), verify=verify) for ref, _ in pairs]
+    built = [TransitionSource(open_view(ref), verify=verify, n_step=n_step, gamma=1.0 if gamma is None else gamma)
+             for ref, _ in pairs]
     for (ref, _), src in zip(pairs, built):
         if len(src) == 0:
             raise ConfigError(f"dataset {ref} has no transitions (every episode was a one-frame truncation)")

@@ -138,6 +138,7 @@ class TrainConfig:
     weight_decay: float = 0.0
     grad_clip: float = 10.0  # max gradient norm; 0 disables clipping
     gamma: float = 0.9  # discount
+    n_step: int = 1  # transitions span up to n steps of the data (n-step returns); the sampler must match
     polyak: float = 0.995  # target network 1: theta_bar <- polyak * theta_bar + (1 - polyak) * theta, every step
     lag_period: int = 1000  # target network 2: a copy of the online network, refreshed every lag_period steps
     cem: CemConfig = field(default_factory=CemConfig)  # action maximisation for the Bellman target
@@ -160,6 +161,8 @@ class TrainConfig:
             raise ConfigError(f"learning rate {self.lr} is out of range; use e.g. 3e-4 (or leave it unset)")
         if not 0 <= self.gamma <= 1 or not 0 <= self.polyak < 1:
             raise ConfigError(f"gamma {self.gamma} must be in [0, 1] and polyak {self.polyak} in [0, 1)")
+        if self.n_step < 1:
+            raise ConfigError(f"n_step {self.n_step} must be at least 1 (1 = one-step QT-Opt)")
         if self.lag_period < 1 or self.log_every < 1 or self.checkpoint_every < 1 or self.eval_every < 0:
             raise ConfigError("lag_period, log_every and checkpoint_every must be >= 1 and eval_every >= 0 "
                               f"(got {self.lag_period}, {self.log_every}, {self.checkpoint_every}, {self.eval_every})")

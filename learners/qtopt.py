@@ -6,6 +6,10 @@ logit) against the clipped double-Q target of QT-Opt::
     a*     = argmax_a Q_polyak(s', a)                       (CEM)
     target = r + gamma * (1 - done) * min(Q_polyak(s', a*), Q_lagged(s', a*))
 
+With n-step transitions (``TrainConfig.n_step``) r is the discounted return
+of up to n data steps and gamma becomes the batch's ``keys.DISCOUNT``,
+gamma^k: the data's own actions replace k - 1 of the maximisations.
+
 ``Q_polyak`` is a Polyak average of the online weights (updated every step)
 and ``Q_lagged`` a copy of the online weights refreshed every
 ``lag_period`` steps.  Q values are probabilities of success (sigmoids), so a
@@ -69,10 +73,11 @@ class Learner:
 
 
 def bellman_target(polyak: QNetwork, lagged: QNetwork, next_image: torch.Tensor, next_state: torch.Tensor,
-                   reward: torch.Tensor, done: torch.Tensor, gamma: float, cem: CemConfig,
+                   reward: torch.Tensor, done: torch.Tensor, gamma: float | torch.Tensor, cem: CemConfig,
                    noise: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Clipped double-Q targets (B,) and the next-state values (B,) (0 where ``done``).
 
+    ``gamma`` is a number or a per-transition (B,) discount (n-step batches).
     Terminal transitions need no next-state value, so CEM runs only on the
     others (``noise`` is drawn for the whole batch, keeping the draw fixed).
     """
@@ -105,7 +110,7 @@ def update(learner: Learner, batch: dict[str, torch.Tensor], cfg: TrainConfig, s
 
     with torch.no_grad():
         target, next_value = bellman_target(learner.polyak, learner.lagged, next_image, batch[keys.NEXT_OBS_STATE],
-                                            reward, done, cfg.gamma, cfg.cem, noise)
+                                            reward, done, batch.get(keys.DISCOUNT, cfg.gamma), cfg.cem, noise)
 
     if cfg.conservative > 0:
         # The data's action first, then uniform random candidates; one trunk pass for all of them.

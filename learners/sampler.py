@@ -144,7 +144,11 @@ class MixtureSampler:
 
     def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
         pieces = [s.sample(n, rng) for (s, _), n in zip(self.parts, self.counts(batch_size)) if n > 0]
-        return {k: np.concatenate([p[k] for p in pieces]) for k in BATCH_KEYS}
+        names = {frozenset(p) for p in pieces}
+        if len(names) != 1:
+            raise ConfigError("the mixed samplers return different batch keys (one-step and n-step?); "
+                              "build them alike")
+        return {k: np.concatenate([p[k] for p in pieces]) for k in pieces[0]}
 
     def describe(self) -> dict[str, Any]:
         sources = []

@@ -116,6 +116,11 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
         raise ConfigError(f"method {method!r} fine-tunes a parent; pass init_checkpoint (or use method 'scratch')")
     if init_checkpoint is not None and net is not None:
         raise ConfigError("the architecture comes from init_checkpoint; do not pass net as well")
+    data = sampler.describe()
+    if (data.get("n_step", 1), data.get("gamma", config.gamma)) != (config.n_step, config.gamma):
+        raise ConfigError(f"the sampler gives {data.get('n_step', 1)}-step transitions (gamma {data.get('gamma')}) but "
+                          f"the config asks for n_step {config.n_step}, gamma {config.gamma}; build the sampler with "
+                          "the config's values")
     parent = load_checkpoint(Path(init_checkpoint)) if init_checkpoint is not None else None
     lr = resolve_lr(config, method, parent)
     resolved = config.replace(lr=lr)
@@ -123,7 +128,7 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
     parent_info = None if parent is None else {"id": checkpoint_id(parent.path), "path": str(parent.path),
                                                "step": parent.step, "method": parent.config["method"]}
     run = {"training": resolved.to_dict(), "method": method, "parent": parent_info,
-           "architecture": model.cfg.to_dict(), "data": sampler.describe()}
+           "architecture": model.cfg.to_dict(), "data": data}
     _check_same_run(out, run)
 
     learner = Learner.create(model, lr, resolved)

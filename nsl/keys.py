@@ -21,6 +21,7 @@ TASK_INDEX = "task_index"
 # Transition batches produced by the training loader.
 NEXT_OBS_IMAGE = "next.observation.image"
 NEXT_OBS_STATE = "next.observation.state"
+DISCOUNT = "next.discount"  # float32: gamma^k for a k-step transition (present only in n-step batches)
 
 STATE_NAMES = ["gripper_opening", "wrist_height", "wrist_x", "wrist_y", "wrist_sin_yaw", "wrist_cos_yaw"]
 ACTION_NAMES = ["dx", "dy", "dz", "dyaw", "close", "terminate"]

@@ -67,7 +67,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                "--dataset grasp-harsh --workers 2")
     p.add_argument("--shift", required=True, help="shift spec: base, harsh_lighting, checkerboard_backing@0.5, ...")
     p.add_argument("--episodes", type=int, required=True, help="total episodes the dataset should hold")
-    p.add_argument("--policy", required=True, help="policy: random, oracle[:NOISE] (noise std, e.g. oracle:0.5)")
+    p.add_argument("--policy", required=True, help="policy: random, oracle[:NOISE] (noise std, e.g. oracle:0.5), "
+                                                  "or a checkpoint, ckpt:NAME[@STEP] (its CEM policy; see --epsilon)")
     p.add_argument("--dataset", required=True, help="dataset name (an existing name resumes or appends)")
     p.add_argument("--workers", type=int, default=1, help="simulator processes (default 1; data is identical)")
     p.add_argument("--seed", type=int, default=0, help="collection seed (default 0)")

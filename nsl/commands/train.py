@@ -12,15 +12,25 @@ METHOD_HELP = ("ft = fine-tune all parameters of --init (the study's method); sc
                "plus a new one); ft_pnn = pnn whose new column starts as a copy of the parent")
 
 
+class _Help(argparse.ArgumentDefaultsHelpFormatter):
+    """Adds "(default: X)" only where the help does not already say what the default is."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if "default" in text or action.default in (None, False, []):
+            return text
+        return super()._get_help_string(action)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "train", help="pre-train (no --init) or fine-tune (--init CKPT) a Q-function offline",
         description="Offline QT-Opt on one or more dataset versions mixed by weight. Without --init this is "
-                    "pre-training; with --init it fine-tunes from a catalogued checkpoint at 25%% of its learning "
+                    "pre-training; with --init it fine-tunes from a catalogued checkpoint at 25% of its learning "
                     "rate (the study's recipe: mix the target data 50/50 with the base data). Running the same "
                     "command again resumes from the last checkpoint. The final checkpoint (and, with early "
                     "stopping, every evaluated one) is registered in the catalog under --name.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+        formatter_class=_Help)
     p.add_argument("--data", action="append", required=True, metavar="REF[=WEIGHT]",
                    help="dataset NAME[@vN][:TIER] with its share of each batch; repeat for a mix "
                         "(default weights equal), e.g. --data grasp-base=0.5 --data grasp-harsh:100=0.5")
@@ -29,13 +39,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--lr", type=float, default=None, help="learning rate (default 3e-4; fine-tuning: 25%% of the parent's)")
     p.add_argument("--steps", type=int, required=True, help="gradient steps")
     p.add_argument("--name", required=True, help="checkpoint name in the catalog (also the run folder)")
-    p.add_argument("--batch-size", type=int, default=64)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--checkpoint-every", type=int, default=2000)
+    p.add_argument("--batch-size", type=int, default=64, help="transitions per gradient step")
+    p.add_argument("--seed", type=int, default=0, help="seed of initialisation, sampling, augmentation and CEM; "
+                                                       "the same seed gives the same weights")
+    p.add_argument("--checkpoint-every", type=int, default=2000,
+                   help="steps between checkpoints (a killed run resumes from the last one)")
     p.add_argument("--no-augment", action="store_true", help="switch image augmentation off")
     p.add_argument("--conservative", type=float, default=0.0, metavar="ALPHA",
                    help="weight of scoring random actions as failures, which keeps offline Q values of unseen "
                         "actions down (default 0 = plain QT-Opt)")
+    p.add_argument("--n-step", type=int, default=1, metavar="N",
+                   help="n-step returns: bootstrap after up to N steps of the data's own actions, so fewer "
+                        "Bellman maximisations stack up offline")
     p.add_argument("--crop", type=int, default=None, metavar="PIXELS",
                    help="random-shift augmentation in pixels (default 4; 0 keeps the colour jitter only)")
     p.add_argument("--net", action="append", default=[], metavar="FIELD=VALUE",
@@ -137,13 +152,12 @@ def run(args: argparse.Namespace) -> int:
     if args.eval_every and args.criterion != "eval":
         train_view, held_out = api.episode_split(target_view, args.holdout)
         sources[-1] = (train_view, mix[-1][1])
-    sampler = api.make_sampler(sources)
-
     config = TrainConfig(steps=args.steps, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
                          checkpoint_every=args.checkpoint_every, eval_every=args.eval_every,
-                         conservative=args.conservative,
+                         conservative=args.conservative, n_step=args.n_step,
                          **({"augment_crop": 0, "augment_colour": 0.0} if args.no_augment else {}),
                          **({"augment_crop": args.crop} if args.crop is not None and not args.no_augment else {}))
+    sampler = api.make_sampler(sources, n_step=config.n_step, gamma=config.gamma)
     run_dir = workspace.runs_dir() / args.name
     run_dir.mkdir(parents=True, exist_ok=True)
     workspace.atomic_write_json(run_dir / "command.json", {

@@ -67,3 +67,29 @@ def test_sampler_errors_are_one_line(make_synth):
         api.make_sampler([])
     with pytest.raises(ConfigError, match="holdout 2 of base@v1"):
         api.episode_split("base", 2)
+
+
+def test_n_step_transitions_follow_the_data_to_the_episode_end(make_synth):
+    lengths, gamma, n = [3, 4, 2, 6], 0.5, 3
+    make_synth("chains", lengths, truncated={1}, successes={2, 3})
+    one, s = api.make_sampler("chains"), api.make_sampler("chains", n_step=n, gamma=gamma)
+    assert len(s) == len(one) and s.describe()["n_step"] == n and keys.DISCOUNT not in one.sample(4, np.random.default_rng(0))
+    b = s.sample(4000, np.random.default_rng(0))
+    ep, t = b[keys.OBS_IMAGE][:, 0, 0, 0].astype(int), b[keys.OBS_IMAGE][:, 0, 0, 1].astype(int)
+    nep, nt = b[keys.NEXT_OBS_IMAGE][:, 0, 0, 0].astype(int), b[keys.NEXT_OBS_IMAGE][:, 0, 0, 1].astype(int)
+    length = np.array(lengths)[ep]
+    truncated, success = ep == 1, np.isin(ep, [2, 3])
+    # A terminated episode ends within the chain when its last frame is at most n - 1 frames ahead.
+    k = np.where(truncated, np.minimum(n, length - 1 - t), np.minimum(n, length - t))
+    terminal = ~truncated & (t + k == length)
+    np.testing.assert_array_equal(b[keys.DONE], terminal.astype(np.float32))
+    np.testing.assert_array_equal(nep, ep)
+    np.testing.assert_array_equal(nt[~terminal], (t + k)[~terminal])
+    np.testing.assert_allclose(b[keys.DISCOUNT][~terminal], gamma ** k[~terminal])
+    np.testing.assert_allclose(b[keys.REWARD], np.where(terminal & success, gamma ** (k - 1), 0.0))
+    np.testing.assert_allclose(b[keys.NEXT_OBS_STATE][~terminal, 1], nt[~terminal] / 10.0, rtol=1e-6)
+    assert set(k[terminal & success]) == {1, 2, 3} and set(k[~terminal]) == {1, 2, 3}  # all cases were drawn
+    with pytest.raises(ConfigError, match="need the discount gamma"):
+        api.make_sampler("chains", n_step=2)
+    with pytest.raises(ConfigError, match="n_step 0"):
+        api.make_sampler("chains", n_step=0, gamma=0.9)

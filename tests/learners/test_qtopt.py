@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import numpy as np
+import pytest
 import torch
 
 from nsl import keys
-from nsl.learners import CemConfig, Learner, QNetwork, bellman_target, cem_maximize, noise_from_generator, update
+from nsl.errors import ConfigError
+from nsl.learners import (ArraySampler, CemConfig, Learner, QNetwork, bellman_target, cem_maximize,
+                          noise_from_generator, train, update)
 from nsl.learners.qtopt import batch_to_torch
 
 from learner_factories import TINY_CEM, TINY_NET, random_transitions, tiny_train
@@ -36,6 +40,27 @@ def test_target_is_reward_plus_discounted_minimum_of_the_two_target_networks():
         expected = reward + 0.9 * (1 - done) * v
         assert torch.allclose(target, expected, atol=1e-6)
         assert torch.allclose(value, (1 - done) * v, atol=1e-6)
+
+
+def test_n_step_batches_bootstrap_with_their_own_discount(tmp_path):
+    image, state = _next()
+    reward, done = torch.zeros(6), torch.zeros(6)
+    discount = torch.tensor([0.9, 0.81, 0.729, 0.9, 0.81, 0.729])
+    noise = noise_from_generator(6, 4, TINY_CEM, torch.Generator().manual_seed(1))
+    polyak, lagged = _constant(QNetwork(TINY_NET), 0.5), _constant(QNetwork(TINY_NET), 0.5)
+    target, _ = bellman_target(polyak, lagged, image, state, reward, done, discount, TINY_CEM, noise)
+    assert torch.allclose(target, 0.5 * discount, atol=1e-6)
+    # update() takes the batch's DISCOUNT in place of gamma: with discount 0 the target is the reward.
+    batch = random_transitions(16, done_rate=0.0)
+    stats = {}
+    for name, extra in (("gamma", {}), ("zero", {keys.DISCOUNT: np.zeros(16, np.float32)})):
+        learner = Learner.create(QNetwork(TINY_NET), 1e-3, tiny_train())
+        stats[name] = update(learner, batch_to_torch({**batch, **extra}), tiny_train(), 0)
+    assert stats["zero"]["q/target_mean"] == pytest.approx(batch[keys.REWARD].mean(), abs=1e-6)
+    assert stats["gamma"]["q/target_mean"] > stats["zero"]["q/target_mean"] + 0.1
+    # A trainer refuses a sampler whose transitions do not match its n_step.
+    with pytest.raises(ConfigError, match="1-step transitions .* n_step 3"):
+        train(tiny_train(n_step=3), ArraySampler.from_transitions(batch), tmp_path / "run", progress=False)
 
 
 def test_target_maximises_the_polyak_network_and_evaluates_both_networks_there():

@@ -54,6 +54,23 @@ def test_mixture_draws_fixed_shares_and_describes_weights():
         MixtureSampler([(base, 0.0)])
 
 
+class _Discounted(ArraySampler):
+    """An n-step-style sampler: its batches also carry a per-transition discount."""
+
+    def sample(self, batch_size, rng):
+        return {**super().sample(batch_size, rng), keys.DISCOUNT: np.full(batch_size, 0.81, np.float32)}
+
+
+def test_mixture_keeps_extra_keys_and_refuses_mixing_one_step_with_n_step():
+    a = _Discounted.from_episodes([_episode(3, 2)], name="a")
+    b = _Discounted.from_episodes([_episode(3, 4)], name="b")
+    batch = MixtureSampler([(a, 1.0), (b, 1.0)]).sample(8, np.random.default_rng(0))
+    np.testing.assert_array_equal(batch[keys.DISCOUNT], np.full(8, 0.81, np.float32))
+    plain = ArraySampler.from_episodes([_episode(3, 4)], name="plain")
+    with pytest.raises(ConfigError, match="different batch keys"):
+        MixtureSampler([(a, 1.0), (plain, 1.0)]).sample(8, np.random.default_rng(0))
+
+
 def test_inconsistent_arrays_are_refused():
     t = random_transitions(4)
     with pytest.raises(ConfigError, match="lack key"):
