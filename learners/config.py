@@ -13,6 +13,8 @@ every checkpoint's ``config.json``:
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
@@ -135,6 +137,8 @@ class TrainConfig:
     steps: int = 20_000  # gradient steps (the run's total, also after a resume)
     batch_size: int = 64
     lr: float | None = None  # None: 3e-4 from scratch, 25% of the parent's learning rate when fine-tuning
+    lr_decay: int = 0  # cosine decay of the learning rate to lr_floor * lr over this many steps, then flat; 0 = constant
+    lr_floor: float = 0.05  # the decayed learning rate as a fraction of lr
     weight_decay: float = 0.0
     grad_clip: float = 10.0  # max gradient norm; 0 disables clipping
     gamma: float = 0.9  # discount
@@ -161,6 +165,9 @@ class TrainConfig:
             raise ConfigError(f"learning rate {self.lr} is out of range; use e.g. 3e-4 (or leave it unset)")
         if not 0 <= self.gamma <= 1 or not 0 <= self.polyak < 1:
             raise ConfigError(f"gamma {self.gamma} must be in [0, 1] and polyak {self.polyak} in [0, 1)")
+        if self.lr_decay < 0 or not 0 <= self.lr_floor <= 1:
+            raise ConfigError(f"lr_decay {self.lr_decay} must be >= 0 (0 = constant) and lr_floor {self.lr_floor} "
+                              "in [0, 1]")
         if self.n_step < 1:
             raise ConfigError(f"n_step {self.n_step} must be at least 1 (1 = one-step QT-Opt)")
         if self.lag_period < 1 or self.log_every < 1 or self.checkpoint_every < 1 or self.eval_every < 0:
@@ -173,6 +180,15 @@ class TrainConfig:
                               f"{self.conservative_samples} >= 1")
         if self.keep_trainer_state < 1:
             raise ConfigError(f"keep_trainer_state {self.keep_trainer_state} must be at least 1 (resume needs one)")
+
+    def lr_at(self, step: int) -> float:
+        """The learning rate of gradient step ``step`` (0-based): ``lr``, cosine-decayed when ``lr_decay`` > 0."""
+        if self.lr is None:
+            raise ConfigError("lr is unresolved; resolve it (train() does) before asking for the schedule")
+        if not self.lr_decay:
+            return self.lr
+        frac = min(step, self.lr_decay) / self.lr_decay
+        return self.lr * (self.lr_floor + (1 - self.lr_floor) * 0.5 * (1 + math.cos(math.pi * frac)))
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)

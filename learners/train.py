@@ -163,6 +163,9 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
             stop = _evaluate(eval_fn, learner, resolved, 0, out, log, evals)
         while step < config.steps and not stop:
             batch = batch_to_torch(sampler.sample(config.batch_size, rng))
+            step_lr = resolved.lr_at(step)
+            for group in learner.optimizer.param_groups:
+                group["lr"] = step_lr
             metrics = update(learner, batch, resolved, step)
             step += 1
             n0 += 1
@@ -172,7 +175,7 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
             if step % config.log_every == 0 or step == config.steps:
                 dt = time.perf_counter() - t0
                 last_row = {k: v / n0 for k, v in window.items()} | {"charts/steps_per_s": n0 / max(dt, 1e-9),
-                                                                      "charts/lr": lr}
+                                                                      "charts/lr": step_lr}
                 log.metrics(step, last_row)
                 bar.set_postfix(loss=f"{last_row['losses/q_loss']:.4f}", q=f"{last_row['q/mean']:.3f}",
                                 target=f"{last_row['q/target_mean']:.3f}")

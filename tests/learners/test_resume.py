@@ -80,3 +80,23 @@ def test_eval_hook_is_called_every_k_steps_and_can_stop_the_run(random_sampler, 
     assert (tmp_path / "run" / "checkpoints" / "step-000000006").is_dir()
     assert [e["step"] for e in result.evals] == [0, 3, 6]
     assert (tmp_path / "run" / "eval.jsonl").read_text().count("\n") == 3
+
+
+def test_cosine_lr_decay_follows_its_schedule_and_resumes_exactly(random_sampler, tmp_path):
+    cfg = tiny_train(steps=16, checkpoint_every=8, log_every=4, lr=1e-3, lr_decay=12, lr_floor=0.1)
+    assert cfg.lr_at(0) == pytest.approx(1e-3) and cfg.lr_at(6) == pytest.approx(0.55e-3)
+    assert cfg.lr_at(12) == cfg.lr_at(100) == pytest.approx(1e-4)
+    whole = train(cfg, random_sampler, tmp_path / "whole", net=TINY_NET, progress=False)
+    with open(tmp_path / "whole" / "metrics.csv") as f:
+        logged = [float(r["charts/lr"]) for r in csv.DictReader(f)]
+    assert logged == pytest.approx([cfg.lr_at(s) for s in (3, 7, 11, 15)], rel=1e-4)  # the rate of each row's last step
+    with pytest.raises(_Crash):
+        train(cfg, _CrashingSampler(random_sampler, crash_at=10), tmp_path / "killed", net=TINY_NET, progress=False)
+    resumed = train(cfg, random_sampler, tmp_path / "killed", net=TINY_NET, progress=False)
+    a, b = load_checkpoint(whole.checkpoint).net.state_dict(), load_checkpoint(resumed.checkpoint).net.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    constant = train(cfg.replace(lr_decay=0), random_sampler, tmp_path / "constant", net=TINY_NET, progress=False)
+    c = load_checkpoint(constant.checkpoint).net.state_dict()
+    assert not all(torch.equal(a[k], c[k]) for k in a)  # the schedule reached the optimiser
+    with pytest.raises(ConfigError, match="lr_decay"):
+        cfg.replace(lr_decay=-1)
