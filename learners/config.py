@@ -14,7 +14,6 @@ every checkpoint's ``config.json``:
 from __future__ import annotations
 
 import math
-
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 

@@ -236,7 +236,8 @@ def _check_same_run(out: Path, run: dict) -> None:
     for section in ("method", "parent", "architecture", "data", "training"):
         a, b = old.get(section), json.loads(json.dumps(run[section]))
         if section == "training":
-            a = {k: v for k, v in (a or {}).items() if k not in RESUMABLE_CHANGES}
+            a = TrainConfig.from_dict(a).to_dict() if a else {}  # settings added since then take their defaults
+            a = {k: v for k, v in a.items() if k not in RESUMABLE_CHANGES}
             b = {k: v for k, v in b.items() if k not in RESUMABLE_CHANGES}
         if a != b:
             diff = sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k)) if isinstance(a, dict) and isinstance(b, dict) else []

@@ -100,3 +100,19 @@ def test_cosine_lr_decay_follows_its_schedule_and_resumes_exactly(random_sampler
     assert not all(torch.equal(a[k], c[k]) for k in a)  # the schedule reached the optimiser
     with pytest.raises(ConfigError, match="lr_decay"):
         cfg.replace(lr_decay=-1)
+
+
+def test_a_run_recorded_before_a_setting_existed_still_resumes(random_sampler, tmp_path):
+    import json
+
+    cfg = tiny_train(steps=8, checkpoint_every=4)
+    with pytest.raises(_Crash):
+        train(cfg, _CrashingSampler(random_sampler, crash_at=6), tmp_path / "run", net=TINY_NET, progress=False)
+    run_file = tmp_path / "run" / "run.json"
+    run = json.loads(run_file.read_text())
+    for added in ("lr_decay", "lr_floor"):  # settings newer than the run: they take their defaults
+        del run["training"][added]
+    run_file.write_text(json.dumps(run))
+    assert train(cfg, random_sampler, tmp_path / "run", net=TINY_NET, progress=False).step == 8
+    with pytest.raises(ConfigError, match=r"different training \(\['lr_decay'\]\)"):
+        train(cfg.replace(steps=12, lr_decay=12), random_sampler, tmp_path / "run", net=TINY_NET, progress=False)
