@@ -8,10 +8,8 @@ NSL=${NSL:-.venv/bin/nsl}
 PY=${PY:-.venv/bin/python}
 
 if [ "${1:-}" != "ship" ]; then
-  # 8,000 base-task episodes on the train objects: oracle:0.5 (78% success), oracle:1.0 (51%), random (11%).
-  $NSL collect --shift base --episodes 4000 --policy oracle:0.5 --dataset grasp-base-oracle --seed 1 --workers 2 --batch 8
-  $NSL collect --shift base --episodes 2000 --policy oracle:1.0 --dataset grasp-base-noisy --seed 2 --workers 2 --batch 8
-  $NSL collect --shift base --episodes 2000 --policy random --dataset grasp-base-random --seed 3 --workers 2 --batch 8
+  # 8,000 scripted base-task episodes on the train objects.
+  NSL=$NSL bash scripts/collect_base_data.sh
 
   # Offline QT-Opt from scratch, mixed 50/25/25, evaluated on 50 test-object episodes every 2,000 steps.
   # The shipped weights are this run's checkpoint at step 6,000 (success peaks there and then declines;

@@ -6,10 +6,8 @@
 set -euo pipefail
 NSL=${NSL:-.venv/bin/nsl}
 
-# 8,000 scripted base-task episodes on the train objects: oracle:0.5 (78% success), oracle:1.0 (51%), random (11%).
-$NSL collect --shift base --episodes 4000 --policy oracle:0.5 --dataset grasp-base-oracle --seed 1 --workers 2 --batch 8
-$NSL collect --shift base --episodes 2000 --policy oracle:1.0 --dataset grasp-base-noisy --seed 2 --workers 2 --batch 8
-$NSL collect --shift base --episodes 2000 --policy random --dataset grasp-base-random --seed 3 --workers 2 --batch 8
+# 8,000 scripted base-task episodes on the train objects.
+NSL=$NSL bash scripts/collect_base_data.sh
 
 # Stage 1: one-step QT-Opt from scratch on the scripted data, mixed 50/25/25, to step 6,000
 # (the shipped base's own recipe, stopped at the step that ships).
