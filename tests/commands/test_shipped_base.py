@@ -58,3 +58,21 @@ def test_shipped_base_grasps_well_and_every_shift_hurts(capsys):
     for shift, r in results.items():
         if shift != "base":
             assert r["success_rate"] <= base - 0.15 + 1e-9, (shift, r, base)
+
+
+@pytest.mark.slow
+def test_shipped_base_fine_tunes_to_harsh_lighting(capsys):
+    """The demo's main effect, which a new base must keep (README, "How plastic is a base?"): 300 steps of
+    the study's fine-tune on the demo's data lift harsh-lighting success from 13% to 60% on these scenes."""
+    for shift, name in (("base", "demo-base"), ("harsh_lighting", "demo-harsh")):
+        assert run_cli("collect", "--shift", shift, "--episodes", "600" if shift == "base" else "100",
+                       "--policy", "oracle:1.0", "--dataset", name, "--workers", "2", "--batch", "4") == 0
+    assert run_cli("train", "--data", "demo-base=0.5", "--data", "demo-harsh=0.5", "--init", "ckpt:base",
+                   "--steps", "300", "--name", "plastic") == 0
+    capsys.readouterr()
+    assert run_cli("eval", "--checkpoint", "ckpt:base,ckpt:plastic", "--shift", "harsh_lighting", "--episodes", "100",
+                   "--workers", "2", "--seed", "2000", "--json") == 0
+    out = json.loads(capsys.readouterr().out)
+    before, after = (out["policies"][k]["results"]["harsh_lighting"]["success_rate"] for k in ("ckpt:base", "ckpt:plastic"))
+    assert after >= before + 0.30, out["policies"]
+    assert out["paired"]["harsh_lighting"]["p_value"] < 0.01
