@@ -1,7 +1,7 @@
 """Research probes behind README numbers that no `nsl` command gives: a checkpoint acting with other CEM
 settings, its Polyak-averaged weights, and CEM over the mean Q of several checkpoints. Each prints the
-success on test scenes of one shift (default: the base task); episode i uses scene seed (--seed, i), so the scenes are those of
-`nsl eval --episodes N --seed S`. Checkpoints are folders (catalogued ones live in $NSL_HOME/checkpoints).
+success on test scenes of one shift (default: the base task); episode i uses scene seed (--seed, i), so the
+scenes are those of `nsl eval --episodes N --seed S`. Checkpoints are folders (catalogued ones live in $NSL_HOME/checkpoints).
 
     .venv/bin/python scripts/probe_policies.py cem --samples 256 --elites 16 --iterations 3 --seed 3000 DIR...
     .venv/bin/python scripts/probe_policies.py polyak --seed 3000 DIR...      # DIR must hold trainer_state.pt
@@ -16,36 +16,33 @@ import shutil
 import tempfile
 from pathlib import Path
 
-import numpy as np
 import safetensors.torch
 import torch
 
 from nsl.collectors import parse_shift
 from nsl.eval import EvalConfig, evaluate
-from nsl.learners import (CHECKPOINT_FORMAT, CONFIG_FILE, MODEL_FILE, TRAINER_FILE, CemConfig, cem_maximize,
-                          full_actions, load_checkpoint, load_policy, noise_from_rngs)
-from nsl.learners.augment import to_float
+from nsl.learners import (CHECKPOINT_FORMAT, CONFIG_FILE, MODEL_FILE, TRAINER_FILE, CemConfig, CEMPolicy,
+                          load_checkpoint, load_policy)
 
 
-class MeanQPolicy:
-    """Greedy CEM over the mean logit of several Q-networks (one image encoding per network)."""
+class MeanQNet(torch.nn.Module):
+    """Several Q-networks as one: the mean of their logits, each network encoding the image once."""
 
-    needs_privileged = False
+    def __init__(self, nets):
+        super().__init__()
+        self.nets = torch.nn.ModuleList(nets)
+        self.cfg = nets[0].cfg
 
-    def __init__(self, dirs: list[str]):
-        self.nets = [load_checkpoint(d).net.eval() for d in dirs]
-        self.cem = CemConfig()
+    def encode(self, image, state):
+        return [n.encode(image, state) for n in self.nets]
 
-    def __call__(self, obs, *, rngs, privileged=None):
-        image = to_float(torch.from_numpy(np.asarray(obs["image"])))
-        state = torch.from_numpy(np.asarray(obs["state"], np.float32))
-        cfg = self.nets[0].cfg
-        noise = noise_from_rngs(rngs, len(cfg.action_dims), self.cem)
-        with torch.inference_mode():
-            ctxs = [n.encode(image, state) for n in self.nets]
-            best, _ = cem_maximize(lambda c: sum(n.score(x, c) for n, x in zip(self.nets, ctxs)) / len(ctxs),
-                                   noise, self.cem)
-        return full_actions(best.numpy().astype(np.float32), cfg)
+    def score(self, ctxs, actions):
+        return sum(n.score(c, actions) for n, c in zip(self.nets, ctxs)) / len(self.nets)
+
+
+def mean_q_policy(dirs: list[str]) -> CEMPolicy:
+    """Greedy CEM (QT-Opt's settings) over the mean Q of the checkpoints in ``dirs``."""
+    return CEMPolicy(MeanQNet([load_checkpoint(d).net for d in dirs]), CemConfig(), name=f"mean-q-of-{len(dirs)}")
 
 
 def polyak_folder(src: Path, dst: Path) -> Path:
@@ -81,10 +78,10 @@ def main() -> None:
     ap.add_argument("--iterations", type=int, default=2)
     args = ap.parse_args()
     if args.probe == "ensemble":
-        report(f"mean Q of {len(args.dirs)}", functools.partial(MeanQPolicy, args.dirs), args)
+        report(f"mean Q of {len(args.dirs)}", functools.partial(mean_q_policy, args.dirs), args)
     elif args.probe == "cem":
+        cem = dict(samples=args.samples, elites=args.elites, iterations=args.iterations)
         for d in args.dirs:
-            cem = dict(samples=args.samples, elites=args.elites, iterations=args.iterations)
             report(f"{d} CEM {args.samples}/{args.elites}/{args.iterations}", functools.partial(load_policy, d, **cem), args)
     else:
         with tempfile.TemporaryDirectory() as tmp:
