@@ -18,10 +18,9 @@ $NSL collect --shift base --episodes 2000 --policy ckpt:base-stage1@6000 --epsil
 
 # Stage 2: from scratch again, Monte-Carlo returns (--n-step 8 spans the whole episode) on all four
 # datasets, with the learning rate cosine-decayed to 5% over the 6,000 steps; four seeds.
-$NSL train --data grasp-base-oracle=0.35 --data grasp-base-noisy=0.15 --data grasp-base-random=0.15 --data grasp-base-learned=0.35 --steps 6000 --lr-decay 6000 --n-step 8 --eval-every 2000 --eval-episodes 50 --patience 100 --crop 2 --name base-stage2-seed0 --net action_dims=0,1,3 --seed 0
-$NSL train --data grasp-base-oracle=0.35 --data grasp-base-noisy=0.15 --data grasp-base-random=0.15 --data grasp-base-learned=0.35 --steps 6000 --lr-decay 6000 --n-step 8 --eval-every 2000 --eval-episodes 50 --patience 100 --crop 2 --name base-stage2-seed1 --net action_dims=0,1,3 --seed 1
-$NSL train --data grasp-base-oracle=0.35 --data grasp-base-noisy=0.15 --data grasp-base-random=0.15 --data grasp-base-learned=0.35 --steps 6000 --lr-decay 6000 --n-step 8 --eval-every 2000 --eval-episodes 50 --patience 100 --crop 2 --name base-stage2-seed2 --net action_dims=0,1,3 --seed 2
-$NSL train --data grasp-base-oracle=0.35 --data grasp-base-noisy=0.15 --data grasp-base-random=0.15 --data grasp-base-learned=0.35 --steps 6000 --lr-decay 6000 --n-step 8 --eval-every 2000 --eval-episodes 50 --patience 100 --crop 2 --name base-stage2-seed3 --net action_dims=0,1,3 --seed 3
+for seed in 0 1 2 3; do
+  $NSL train --data grasp-base-oracle=0.35 --data grasp-base-noisy=0.15 --data grasp-base-random=0.15 --data grasp-base-learned=0.35 --steps 6000 --lr-decay 6000 --n-step 8 --eval-every 2000 --eval-episodes 50 --patience 100 --crop 2 --name base-stage2-seed$seed --net action_dims=0,1,3 --seed $seed
+done
 
 # Selection: the four final checkpoints on 200 test scenes of seed 3000 (the README reports seed 2000).
 $NSL eval --checkpoint ckpt:base-stage2-seed0@6000,ckpt:base-stage2-seed1@6000,ckpt:base-stage2-seed2@6000,ckpt:base-stage2-seed3@6000 --episodes 200 --workers 2 --seed 3000 --json > "${NSL_HOME:-$HOME/.nsl}/base-selection.json"
