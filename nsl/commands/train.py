@@ -41,6 +41,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--lr-decay", type=int, default=0, metavar="STEPS",
                    help="cosine-decay the learning rate to 5%% of --lr over STEPS steps, then keep it there; the "
                         "late checkpoints then move less from one to the next (default 0 = constant)")
+    p.add_argument("--weight-decay", type=float, default=0.0, metavar="L2",
+                   help="L2 penalty on the weights, added to the gradient by Adam (default 0)")
     p.add_argument("--name", required=True, help="checkpoint name in the catalog (also the run folder)")
     p.add_argument("--batch-size", type=int, default=64, help="transitions per gradient step")
     p.add_argument("--seed", type=int, default=0, help="seed of initialisation, sampling, augmentation and CEM; "
@@ -158,6 +160,7 @@ def run(args: argparse.Namespace) -> int:
     config = TrainConfig(steps=args.steps, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
                          checkpoint_every=args.checkpoint_every, eval_every=args.eval_every,
                          conservative=args.conservative, n_step=args.n_step, lr_decay=args.lr_decay,
+                         weight_decay=args.weight_decay,
                          **({"augment_crop": 0, "augment_colour": 0.0} if args.no_augment else {}),
                          **({"augment_crop": args.crop} if args.crop is not None and not args.no_augment else {}))
     sampler = api.make_sampler(sources, n_step=config.n_step, gamma=config.gamma)

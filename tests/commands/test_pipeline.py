@@ -138,17 +138,21 @@ def test_pre_training_takes_an_architecture_and_refuses_bad_ones(pipeline, capsy
 
 def test_training_records_crop_and_n_step_and_refuses_data_from_an_older_environment(pipeline, capsys):
     assert run_cli("train", "--data", "grasp-base", "--steps", "2", "--name", "crop-tiny", "--crop", "2",
-                   "--n-step", "3") == 0
+                   "--n-step", "3", "--weight-decay", "1e-4") == 0
     with Catalog() as cat:
         entry = cat.resolve_checkpoint("ckpt:crop-tiny@latest")
     config = json.loads((Path(entry.path) / "config.json").read_text())
     training = config["training"]
     assert (training["augment_crop"], training["augment_colour"], training["n_step"]) == (2, 0.1, 3)
+    assert training["weight_decay"] == 1e-4
     assert (config["data"]["n_step"], config["data"]["gamma"]) == (3, training["gamma"])
     capsys.readouterr()
     assert run_cli("train", "--data", "grasp-base", "--steps", "2", "--name", "x", "--n-step", "0") == 2
     err = capsys.readouterr().err.strip()
     assert "n_step 0" in err and len(err.splitlines()) == 1, err
+    assert run_cli("train", "--data", "grasp-base", "--steps", "2", "--name", "x", "--weight-decay", "-1") == 2
+    err = capsys.readouterr().err.strip()
+    assert "weight_decay" in err and len(err.splitlines()) == 1, err
     # A copy of the base data whose provenance says it came from environment v2 (shoulder camera, 10 cm jaw).
     src = workspace.datasets_dir() / "grasp-base"
     old = workspace.datasets_dir() / "grasp-old"
