@@ -12,11 +12,10 @@ NSL=${NSL:-.venv/bin/nsl}
 HOME_DIR="${NSL_HOME:-$HOME/.nsl}"
 [ $# -ge 1 ] || { echo "usage: $0 CKPT_REF [CKPT_REF ...]  (e.g. ckpt:base)" >&2; exit 2; }
 
-# The demo's two datasets (the same commands as scripts/demo.sh, so the same content hashes).
-[ -d "$HOME_DIR/datasets/demo-base" ] || \
-  $NSL collect --shift base --episodes 600 --policy oracle:1.0 --dataset demo-base --workers 2 --batch 4
-[ -d "$HOME_DIR/datasets/demo-harsh" ] || \
-  $NSL collect --shift harsh_lighting --episodes 100 --policy oracle:1.0 --dataset demo-harsh --workers 2 --batch 4
+# The demo's two datasets (the same commands as scripts/demo.sh, so the same content hashes; a finished
+# collection is not repeated, an interrupted one resumes).
+$NSL collect --shift base --episodes 600 --policy oracle:1.0 --dataset demo-base --workers 2 --batch 4
+$NSL collect --shift harsh_lighting --episodes 100 --policy oracle:1.0 --dataset demo-harsh --workers 2 --batch 4
 
 for ref in "$@"; do
   # ckpt:NAME@STEP -> plast-NAME-STEP (a valid checkpoint name)
