@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The pre-training recipe that reaches the issue's 80% target (README, Status, "Rounds of learned-policy data,
-# session 7"): 82.3% [79.8-84.5] on 1,000 reporting scenes for the selected seed, 80.3% on average over three
+# session 7"): 82.3% [79.8-84.5] on 1,000 reporting scenes for the selected seed, 80.4% on average over three
 # seeds. 10,000 collected episodes: 8,000 scripted, then
 # 667 + 667 episodes from two policies trained on the scripted data, then 666 from a policy trained on all of
 # that. Training is Monte-Carlo QT-Opt (--n-step 8 spans the whole episode) with the learning rate
