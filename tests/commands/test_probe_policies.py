@@ -1,5 +1,5 @@
-"""scripts/probe_policies.py, the research probes behind README numbers: an ensemble of one network repeated
-acts exactly like that network's own CEM policy, and the Polyak probe names what it needs."""
+"""scripts/experiments/probe_policies.py, the research probes behind numbers in docs/experiments.md: an ensemble
+of one network repeated acts exactly like that network's own CEM policy, and the Polyak probe names what it needs."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from nsl.eval import EvalConfig, evaluate_outcomes
 from nsl.learners import load_policy
 
 ASSET = str(Path(nsl.__file__).parent / "assets" / "base")
-SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "probe_policies.py"
+SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "experiments" / "probe_policies.py"
 
 
 def _probe():

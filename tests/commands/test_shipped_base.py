@@ -17,7 +17,7 @@ from tests.conftest import run_cli
 
 ASSET = Path(nsl.__file__).parent / "assets" / "base"
 README = Path(__file__).resolve().parents[2] / "README.md"
-SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "pretrain_base.sh"
+SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "experiments" / "pretrain_base.sh"
 
 
 def test_shipped_base_loads_and_records_its_recipe():
@@ -25,7 +25,7 @@ def test_shipped_base_loads_and_records_its_recipe():
     cfg = ckpt.config
     assert cfg["method"] == "scratch" and cfg["parent"] is None
     sources = cfg["data"]["sources"]
-    assert sum(s["episodes"] for s in sources) <= 10_000  # the issue's data budget
+    assert sum(s["episodes"] for s in sources) <= 10_000  # the project's data budget
     assert all(s["ref"].startswith("grasp-base-") for s in sources)
     assert 0 < cfg["step"] <= cfg["training"]["steps"]
     command = json.loads((ASSET / "command.json").read_text())
@@ -48,8 +48,8 @@ def test_ckpt_base_falls_back_to_the_shipped_checkpoint_and_is_catalogued(capsys
 
 @pytest.mark.slow
 def test_shipped_base_grasps_well_and_every_shift_hurts(capsys):
-    """What the README states: about 70% on 200 unseen test scenes (the issue's 80% is not reached yet),
-    and each shift at least 15 points lower (the issue's bar)."""
+    """What the README states: about 70% on 200 unseen test scenes (below the project's 80% target), and each
+    shift at least 15 points lower (the project's bar for a shift)."""
     assert run_cli("eval", "--checkpoint", "ckpt:base", "--shift", "all", "--episodes", "200", "--workers", "2",
                    "--seed", "2000", "--json") == 0
     results = json.loads(capsys.readouterr().out)["results"]
@@ -62,8 +62,8 @@ def test_shipped_base_grasps_well_and_every_shift_hurts(capsys):
 
 @pytest.mark.slow
 def test_shipped_base_fine_tunes_to_harsh_lighting(capsys):
-    """The demo's main effect, which a new base must keep (README, "How plastic is a base?"): 300 steps of
-    the study's fine-tune on the demo's data lift harsh-lighting success from 13% to 60% on these scenes."""
+    """The demo's main effect, which a new base must keep (docs/experiments.md, "Plasticity of a base"): 300
+    steps of the study's fine-tune on the demo's data lift harsh-lighting success from 13% to 60% on these scenes."""
     for shift, name in (("base", "demo-base"), ("harsh_lighting", "demo-harsh")):
         assert run_cli("collect", "--shift", shift, "--episodes", "600" if shift == "base" else "100",
                        "--policy", "oracle:1.0", "--dataset", name, "--workers", "2", "--batch", "4") == 0

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
-# Reproduces the base checkpoint that ships in nsl/assets/base (README, "The shipped base policy").
-# About 6 minutes of collection and under an hour of training on 2 cores. Outputs go to $NSL_HOME.
-# Every step resumes when run again. Then: `bash scripts/pretrain_base.sh ship` copies the step-6000
-# checkpoint into nsl/assets/base.
+# Reproduces the base checkpoint that ships in nsl/assets/base (ckpt:base; reported in README.md, "The shipped
+# base policy", and docs/experiments.md, "The shipped base policy"). About 6 minutes of collection and under an
+# hour of training on 2 cores. Outputs go to $NSL_HOME. Every step resumes when run again. Then
+# `bash scripts/experiments/pretrain_base.sh ship` copies the step-6000 checkpoint into nsl/assets/base.
 set -euo pipefail
+cd "$(dirname "$0")/../.."
 NSL=${NSL:-.venv/bin/nsl}
 PY=${PY:-.venv/bin/python}
 
@@ -13,7 +14,7 @@ if [ "${1:-}" != "ship" ]; then
 
   # Offline QT-Opt from scratch, mixed 50/25/25, evaluated on 50 test-object episodes every 2,000 steps.
   # The shipped weights are this run's checkpoint at step 6,000 (success peaks there and then declines;
-  # README, Status). Stop it with Ctrl-C after step 6,000 if you only want those; it resumes when re-run.
+  # docs/experiments.md, "What limits the base"). Stop it with Ctrl-C after step 6,000 if you only want those; it resumes when re-run.
   $NSL train --data grasp-base-oracle=0.5 --data grasp-base-noisy=0.25 --data grasp-base-random=0.25 --steps 20000 --eval-every 2000 --eval-episodes 50 --patience 100 --crop 2 --name base-flat --net action_dims=0,1,3
   exit 0
 fi

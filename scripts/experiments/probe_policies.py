@@ -1,11 +1,13 @@
-"""Research probes behind README numbers that no `nsl` command gives: a checkpoint acting with other CEM
-settings, its Polyak-averaged weights, and CEM over the mean Q of several checkpoints. Each prints the
-success on test scenes of one shift (default: the base task); episode i uses scene seed (--seed, i), so the
-scenes are those of `nsl eval --episodes N --seed S`. Checkpoints are folders (catalogued ones live in $NSL_HOME/checkpoints).
+"""Research probes behind numbers in docs/experiments.md that no `nsl` command gives ("Acting with other
+CEM settings, Polyak weights and ensembles", "Plasticity of a base", "Ranking recipes on 1,000 scenes"): a
+checkpoint acting with other CEM settings, its Polyak-averaged weights, and CEM over the mean Q of several
+checkpoints. Each prints the success on test scenes of one shift (default: the base task); episode i uses scene
+seed (--seed, i), so the scenes are those of `nsl eval --episodes N --seed S`. Checkpoints are folders
+(catalogued ones live in $NSL_HOME/checkpoints).
 
-    .venv/bin/python scripts/probe_policies.py cem --samples 256 --elites 16 --iterations 3 --seed 3000 DIR...
-    .venv/bin/python scripts/probe_policies.py polyak --seed 3000 DIR...      # DIR must hold trainer_state.pt
-    .venv/bin/python scripts/probe_policies.py ensemble --seed 2000 DIR DIR DIR DIR
+    .venv/bin/python scripts/experiments/probe_policies.py cem --samples 256 --elites 16 --iterations 3 --seed 3000 DIR...
+    .venv/bin/python scripts/experiments/probe_policies.py polyak --seed 3000 DIR...    # DIR must hold trainer_state.pt
+    .venv/bin/python scripts/experiments/probe_policies.py ensemble --seed 2000 DIR DIR DIR DIR
 """
 
 from __future__ import annotations

@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
-# How far the demo's fine-tuning moves a base checkpoint on harsh lighting (README, Status,
-# "How plastic is a base?"). For each checkpoint ref given, it runs the demo's step-5 fine-tune
+# Measures how far the demo's fine-tuning moves a base checkpoint on harsh lighting (reported in
+# docs/experiments.md, "Plasticity of a base"). For each checkpoint ref given, it runs the demo's step-5 fine-tune
 # (demo-base=0.5 + demo-harsh=0.5, 900 steps at 25% of the parent's rate) without stopping early,
 # then evaluates the parent and steps 300 / 600 / 900 on 100 test scenes (seed 2000) of harsh
 # lighting and of the base task. About 2 minutes per checkpoint on 2 cores; outputs go to
 # $NSL_HOME; a finished fine-tune is not repeated.
 #
-#   bash scripts/plasticity_check.sh ckpt:base [ckpt:OTHER@STEP ...]
+#   bash scripts/experiments/plasticity_check.sh ckpt:base [ckpt:OTHER@STEP ...]
 set -euo pipefail
+cd "$(dirname "$0")/../.."
 NSL=${NSL:-.venv/bin/nsl}
 HOME_DIR="${NSL_HOME:-$HOME/.nsl}"
 [ $# -ge 1 ] || { echo "usage: $0 CKPT_REF [CKPT_REF ...]  (e.g. ckpt:base)" >&2; exit 2; }

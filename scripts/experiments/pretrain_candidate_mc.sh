@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
-# The Monte-Carlo base candidate (README, Status, "A better base candidate, not shipped"): 74% on the
-# reporting scenes against the shipped base's 70%, but it fine-tunes to harsh lighting far more slowly.
+# Reproduces the Monte-Carlo base candidate (reported in docs/experiments.md, "The Monte-Carlo candidate"): 74% on
+# the reporting scenes against the shipped base's 70%, but it fine-tunes to harsh lighting far more slowly.
 # About 8 minutes of collection and 35 minutes of training on 2 cores; outputs go to $NSL_HOME, and
 # every step resumes when run again. The four stage-2 seeds are compared on the selection scenes at the end.
 set -euo pipefail
+cd "$(dirname "$0")/../.."
 NSL=${NSL:-.venv/bin/nsl}
 
 # 8,000 scripted base-task episodes on the train objects.
@@ -22,5 +23,5 @@ for seed in 0 1 2 3; do
   $NSL train --data grasp-base-oracle=0.35 --data grasp-base-noisy=0.15 --data grasp-base-random=0.15 --data grasp-base-learned=0.35 --steps 6000 --lr-decay 6000 --n-step 8 --eval-every 2000 --eval-episodes 50 --patience 100 --crop 2 --name base-stage2-seed$seed --net action_dims=0,1,3 --seed $seed
 done
 
-# Selection: the four final checkpoints on 200 test scenes of seed 3000 (the README reports seed 2000).
+# Selection: the four final checkpoints on 200 test scenes of seed 3000 (the reported figures use seed 2000).
 $NSL eval --checkpoint ckpt:base-stage2-seed0@6000,ckpt:base-stage2-seed1@6000,ckpt:base-stage2-seed2@6000,ckpt:base-stage2-seed3@6000 --episodes 200 --workers 2 --seed 3000 --json > "${NSL_HOME:-$HOME/.nsl}/base-selection.json"
