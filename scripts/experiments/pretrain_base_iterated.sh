@@ -40,5 +40,5 @@ for seed in 0 1; do
     --name c1-final-h256$([ $seed = 0 ] || echo -seed$seed)
 done
 
-# Selection on 1,000 scenes of seed 3000 (80.5 / 81.2% here: seed 1 selected); the README reports seed 2000.
+# Selection on 1,000 scenes of seed 3000 (80.5 / 81.2% here: seed 1 selected); docs/experiments.md reports seed 2000.
 $NSL eval --checkpoint ckpt:c1-final-h256@6000,ckpt:c1-final-h256-seed1@6000 --episodes 1000 --workers 2 --seed 3000
