@@ -51,7 +51,7 @@ class ArraySampler:
             raise ConfigError(f"images must be uint8 (N, H, W, 3); got {images.dtype} {images.shape}")
         if states.ndim != 2:
             raise ConfigError(f"states must be (N, state_dim); got {states.shape}")
-        for label, arr, shape in (("states", states, (n, states.shape[1])), ("actions", actions, (n, 6)), ("rewards", rewards, (n,)),
+        for label, arr, shape in (("states", states, (n, states.shape[1])), ("actions", actions, (n, keys.ACTION_DIM)), ("rewards", rewards, (n,)),
                                   ("dones", dones, (n,)), ("next_index", next_index, (n,))):
             if arr.shape != shape:
                 raise ConfigError(f"{label} has shape {arr.shape}; expected {shape} to match {n} images")

@@ -16,30 +16,10 @@ from __future__ import annotations
 
 import os as _os
 
-__version__ = "0.1.0"
+from nsl.version import __version__, code_version  # noqa: F401  (re-exported)
 
 _root = _os.path.dirname(_os.path.dirname(_os.path.abspath(__file__)))
 if _os.path.isfile(_os.path.join(_root, "pyproject.toml")) and _os.path.isdir(
     _os.path.join(_root, "collectors")
 ):
     __path__.append(_root)  # type: ignore[name-defined]  # noqa: F821
-
-
-def code_version() -> str:
-    """The package version plus the git commit when run from a checkout."""
-    import subprocess
-
-    try:
-        out = subprocess.run(
-            ["git", "-C", _root, "rev-parse", "--short=12", "HEAD"],
-            capture_output=True, text=True, timeout=5,
-        )
-        if out.returncode == 0:
-            dirty = subprocess.run(
-                ["git", "-C", _root, "status", "--porcelain", "--untracked-files=no"],
-                capture_output=True, text=True, timeout=5,
-            ).stdout.strip()
-            return f"{__version__}+g{out.stdout.strip()}{'.dirty' if dirty else ''}"
-    except (OSError, subprocess.SubprocessError):
-        pass
-    return __version__
