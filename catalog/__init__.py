@@ -31,7 +31,8 @@ from .records import (
     CheckpointEntry, CheckpointRef, DataRef, DatasetEntry, DataUse, EvaluationEntry, ResolvedData,
     parse_checkpoint_ref, parse_data_ref, short_hash, wilson_interval,
 )
-from .render import format_descendants, format_lineage, render_model_card
+from .lineage import format_descendants, format_lineage
+from .render import render_model_card
 from .schema import MIGRATIONS, SCHEMA_VERSION
 from .store import Catalog, best_checkpoint
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -59,7 +60,17 @@ class DataUse:
 
     @property
     def ref(self) -> str:
-        return f"{DATA_PREFIX}{self.dataset}@v{self.version}" + (f":{self.tier}" if self.tier else "")
+        return f"{DATA_PREFIX}{self.label}"
+
+    @property
+    def label(self) -> str:
+        """``NAME@vN[:K]``."""
+        return f"{self.dataset}@v{self.version}" + (f":{self.tier}" if self.tier is not None else "")
+
+    @staticmethod
+    def mix(uses: Sequence[DataUse]) -> str:
+        """``base@v1 x0.5, harsh@v1:800 x0.5`` (empty for no data)."""
+        return ", ".join(f"{u.label} x{u.weight:g}" for u in uses)
 
 
 @dataclass(frozen=True)

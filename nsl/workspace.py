@@ -1,6 +1,7 @@
-"""Where nsl keeps its files: datasets, checkpoints, the catalog and runs.
+"""Where nsl keeps its files: datasets, checkpoints, the catalog and runs; atomic file writes.
 
-The workspace root is ``$NSL_HOME`` if set, otherwise ``~/.nsl``.
+The workspace root is ``$NSL_HOME`` if set, otherwise ``~/.nsl``.  The base
+checkpoint shipped with the package lives outside it (:func:`shipped_base_dir`).
 """
 
 from __future__ import annotations
@@ -36,6 +37,11 @@ def catalog_path() -> Path:
 
 def cache_dir() -> Path:
     return home() / "cache"
+
+
+def shipped_base_dir() -> Path:
+    """The base checkpoint that ships with nsl (``ckpt:base`` in a workspace that has no checkpoint of that name)."""
+    return Path(__file__).resolve().parent / "assets" / "base"
 
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:
