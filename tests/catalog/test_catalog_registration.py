@@ -106,3 +106,20 @@ def test_without_a_shipped_base_ckpt_base_is_unknown(cat, monkeypatch, tmp_path)
     monkeypatch.setattr(workspace, "shipped_base_dir", lambda: tmp_path / "nothing")
     with pytest.raises(UnknownReferenceError, match="unknown checkpoint 'base'"):
         cat.resolve_checkpoint("ckpt:base")
+
+
+def test_training_again_under_a_new_name_adds_an_alias_and_shares_the_weights(capsys):
+    assert run_cli("collect", "--shift", "base", "--episodes", "4", "--policy", "oracle:0.5", "--dataset", "tiny",
+                   "--batch", "4") == 0
+    train = ("train", "--data", "tiny", "--steps", "2", "--batch-size", "8", "--seed", "3")
+    assert run_cli(*train, "--name", "first") == 0
+    assert run_cli(*train, "--name", "second") == 0  # same data, seed and parent: the same weights
+    with Catalog() as cat:
+        first, second = cat.resolve_checkpoint("ckpt:first"), cat.resolve_checkpoint("ckpt:second@2")
+        assert first == second and cat.names(first.id) == ["first", "second"] and len(cat.checkpoints()) == 1
+    stored = Path(first.path) / WEIGHTS_FILE
+    for run in ("first", "second"):
+        final = workspace.runs_dir() / run / "final" / WEIGHTS_FILE
+        assert final.read_bytes() == stored.read_bytes()
+    assert os.path.samefile(stored, workspace.runs_dir() / "first" / "final" / WEIGHTS_FILE)  # linked, not copied
+    assert f"checkpoint ckpt:second@2 ({first.short_id})" in capsys.readouterr().out
