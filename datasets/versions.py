@@ -26,7 +26,7 @@ from typing import Any
 from nsl import refs
 from nsl.errors import ConfigError, CorruptDataError, unknown
 from nsl.refs import DataRef, parse_data_ref
-from nsl.workspace import atomic_write_json, datasets_dir
+from nsl.workspace import atomic_write_json, datasets_dir, file_sha256
 
 from . import layout
 
@@ -83,14 +83,6 @@ def resolve(ref: str | Ref) -> tuple[Ref, Path]:
 
 
 # -- manifests and hashes --------------------------------------------------------------------------------------------
-
-def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
 
 def content_files(root: Path) -> list[str]:
     """Relative paths of every file of a version except the manifest (and temporary files)."""

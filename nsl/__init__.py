@@ -7,6 +7,14 @@ repository root: ``nsl.collectors``, ``nsl.datasets``, ``nsl.learners``,
 root) this file appends the repository root to ``__path__`` so the same names
 resolve to the root folders.
 
+The modules directly in ``nsl/`` are the small shared core the folders may
+import: ``errors`` (the exception family), ``keys`` (batch keys and
+dimensions), ``workspace`` (paths and atomic writes), ``version``,
+``refs`` (names and dataset references), ``stats`` (the Wilson interval) and
+``checkpoint_format`` (the checkpoint folder format).  The command line
+(``cli``, ``commands/``, ``bench/``) wires the folders together; the core
+imports neither the folders nor the CLI (``tests/test_import_graph.py``).
+
 ``datasets/`` deliberately has no ``__init__.py``: a regular package named
 ``datasets`` at the repository root would shadow Hugging Face's ``datasets``
 (and so break lerobot) whenever the root is on ``sys.path``.

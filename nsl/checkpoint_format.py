@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from nsl.errors import ConfigError, CorruptDataError, UnknownReferenceError
+from nsl.workspace import file_sha256
 
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
@@ -45,14 +46,6 @@ TMP_SUFFIX = ".tmp"
 _CHUNK = 1 << 20
 
 FileSource = bytes | Path  # what a folder file is made from: its bytes, or an existing file to link or copy
-
-
-def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while chunk := f.read(_CHUNK):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def is_temp_name(name: str) -> bool:
