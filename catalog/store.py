@@ -2,8 +2,9 @@
 
 Entries are append-only.  Registering what is already there (same dataset
 name, version and hash; same checkpoint id; same evaluation) returns the
-existing entry; registering something different under an existing key is
-refused; nothing updates a row.  Tags are pointers and may move, but every
+existing entry (the same checkpoint under a new name gains that name as an
+alias); registering something different under an existing key is refused;
+nothing updates a row.  Tags are pointers and may move, but every
 move is a new row, so their history is kept too.
 
 Every write is one ``BEGIN IMMEDIATE`` transaction, so several collection,
