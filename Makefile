@@ -12,7 +12,7 @@ $(VENV)/.installed: pyproject.toml
 	python3 -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test,bench]'
-	$(PY) -m nsl.doctor
+	$(PY) -m nsl.commands._doctor
 	touch $@
 
 install: $(VENV)/.installed

@@ -11,16 +11,20 @@ surface (import from ``nsl.catalog``)::
       .add_evaluation(checkpoint, shift, *, episodes, successes, seed, split, ci, extra)
       .resolve_checkpoint("ckpt:NAME@best"), .resolve_data("data:NAME@v2:800")
       .lineage(ref), .children(id), .trained_on(name, version), .tag(tag, ref), .untag(tag)
+      .names(id)                              # every name of an entry (a re-run under a new name is an alias)
       .write_model_card(ref)
     DataUse, DatasetEntry, CheckpointEntry, EvaluationEntry, ResolvedData   # records
     parse_checkpoint_ref, parse_data_ref, best_checkpoint                    # references
     write_model_folder, checkpoint_id, folder_checkpoint_id, folder_digests  # model folders
     render_model_card
-    format_lineage, format_descendants                                       # text trees
+    format_lineage, format_descendants                                       # text trees (catalog/lineage.py)
     remove, gc_plan, gc_apply, verify                                        # maintenance
     SCHEMA_VERSION, MIGRATIONS, wilson_interval
 
-The folder is a leaf: it imports no other nsl folder.
+``ckpt:base`` falls back to the checkpoint shipped in ``nsl/assets/base``:
+the first reference registers it, with the datasets its ``command.json``
+records.  The folder format is ``nsl.checkpoint_format``'s, shared with the
+learner.  The folder is a leaf: it imports no other nsl folder.
 """
 
 from .folders import (
@@ -31,7 +35,8 @@ from .records import (
     CheckpointEntry, CheckpointRef, DataRef, DatasetEntry, DataUse, EvaluationEntry, ResolvedData,
     parse_checkpoint_ref, parse_data_ref, short_hash, wilson_interval,
 )
-from .render import format_descendants, format_lineage, render_model_card
+from .lineage import format_descendants, format_lineage
+from .render import render_model_card
 from .schema import MIGRATIONS, SCHEMA_VERSION
 from .store import Catalog, best_checkpoint
 

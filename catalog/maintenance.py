@@ -93,6 +93,7 @@ def _remove_checkpoint(cat: Catalog, entry: CheckpointEntry, force: bool, delete
             c.execute("INSERT INTO tags (tag, checkpoint, created) VALUES (?, NULL, ?)", (tag, utc_now()))
             removed.append(f"tag {tag}")
         c.execute("DELETE FROM checkpoint_data WHERE checkpoint = ?", (entry.id,))
+        c.execute("DELETE FROM checkpoint_names WHERE checkpoint = ?", (entry.id,))
         c.execute("DELETE FROM checkpoints WHERE id = ?", (entry.id,))
     if n:
         removed.append(f"{n} evaluation(s)")

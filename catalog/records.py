@@ -9,7 +9,7 @@ References used throughout the CLI::
     ckpt:NAME@TAG           the checkpoint tagged TAG, which must be one of NAME's
     ckpt:TAG                a tag used as an alias (e.g. ckpt:base)
     ckpt:3fa9c2d41e7b       an id prefix (6 or more hex digits)
-    data:NAME[@vN][:TIER]   dataset NAME, version N (default: the newest); TIER is passed to the loader
+    data:NAME[@vN][:K]      dataset NAME, version N (default: the newest), its first K episodes (nsl.refs)
 
 The ``ckpt:`` prefix is optional where only a checkpoint makes sense.
 """
@@ -17,17 +17,19 @@ The ``ckpt:`` prefix is optional where only a checkpoint makes sense.
 from __future__ import annotations
 
 import json
-import math
 import re
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from nsl.errors import ConfigError
+from nsl.refs import CKPT_PREFIX, DATA_PREFIX, NAME_RE, DataRef, check_name, parse_data_ref, parse_tier
+from nsl.stats import wilson_interval
 
-CKPT_PREFIX = "ckpt:"
-DATA_PREFIX = "data:"
-NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
-TIER_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._=-]*")
+__all__ = ["CKPT_PREFIX", "DATA_PREFIX", "CheckpointEntry", "CheckpointRef", "DataRef", "DataUse", "DatasetEntry",
+           "EvaluationEntry", "ResolvedData", "check_name", "dumps", "parse_checkpoint_ref", "parse_data_ref",
+           "short_hash", "wilson_interval"]
+
 HEX_RE = re.compile(r"[0-9a-f]{6,64}")
 RESERVED = ("best", "latest")  # selectors that cannot be tag names
 SHORT_ID = 12  # hex digits shown for a checkpoint id
@@ -38,14 +40,6 @@ def short_hash(h: str | None) -> str:
     return (h or "?").rpartition(":")[2][:SHORT_ID]
 
 
-def check_name(kind: str, name: str) -> str:
-    """Validate a dataset, checkpoint or tag name; return it."""
-    if not isinstance(name, str) or not NAME_RE.fullmatch(name):
-        raise ConfigError(f"{kind} name {name!r} is not valid; use letters, digits, '.', '_' and '-' "
-                          "(no '@', ':' or spaces), starting with a letter or digit")
-    return name
-
-
 @dataclass(frozen=True)
 class DataUse:
     """One dataset a checkpoint was trained on, with its share of each batch."""
@@ -53,11 +47,12 @@ class DataUse:
     dataset: str
     version: int
     weight: float = 1.0  # fraction of each batch drawn from this dataset (e.g. 0.5 for a 50/50 mix)
-    tier: str | None = None  # the subset used (e.g. "800" attempts), as given in data:NAME@vN:TIER
+    tier: int | None = None  # the subset used: the first K episodes (e.g. 800 attempts), as in data:NAME@vN:K
     hash: str = ""  # the dataset's content hash, filled in from the catalog at registration
 
     def __post_init__(self) -> None:
         check_name("dataset", self.dataset)
+        object.__setattr__(self, "tier", parse_tier(self.tier, f"tier of dataset {self.dataset!r}"))
         if not isinstance(self.version, int) or self.version < 1:
             raise ConfigError(f"dataset version {self.version!r} for {self.dataset!r} must be an integer >= 1")
         if not (isinstance(self.weight, (int, float)) and self.weight > 0):
@@ -65,7 +60,17 @@ class DataUse:
 
     @property
     def ref(self) -> str:
-        return f"{DATA_PREFIX}{self.dataset}@v{self.version}" + (f":{self.tier}" if self.tier else "")
+        return f"{DATA_PREFIX}{self.label}"
+
+    @property
+    def label(self) -> str:
+        """``NAME@vN[:K]``."""
+        return f"{self.dataset}@v{self.version}" + (f":{self.tier}" if self.tier is not None else "")
+
+    @staticmethod
+    def mix(uses: Sequence[DataUse]) -> str:
+        """``base@v1 x0.5, harsh@v1:800 x0.5`` (empty for no data)."""
+        return ", ".join(f"{u.label} x{u.weight:g}" for u in uses)
 
 
 @dataclass(frozen=True)
@@ -154,22 +159,11 @@ class CheckpointRef:
 
 
 @dataclass(frozen=True)
-class DataRef:
-    name: str
-    version: int | None = None  # None: the newest registered version
-    tier: str | None = None
-
-    def __str__(self) -> str:
-        v = f"@v{self.version}" if self.version is not None else ""
-        return f"{DATA_PREFIX}{self.name}{v}" + (f":{self.tier}" if self.tier else "")
-
-
-@dataclass(frozen=True)
 class ResolvedData:
     """A ``data:`` reference resolved to its catalog row; the tier is for the datasets loader."""
 
     dataset: DatasetEntry
-    tier: str | None = None
+    tier: int | None = None
 
     def use(self, weight: float = 1.0) -> DataUse:
         """The :class:`DataUse` to record when training on this data with ``weight``."""
@@ -197,37 +191,6 @@ def parse_checkpoint_ref(text: str) -> CheckpointRef:
     return CheckpointRef(name, selector, shift)
 
 
-def parse_data_ref(text: str) -> DataRef:
-    """Parse ``[data:]NAME[@vN][:TIER]``."""
-    body = text.strip()
-    if body.startswith(CKPT_PREFIX):
-        raise ConfigError(f"{text!r} is a checkpoint reference; a dataset is wanted, e.g. data:grasp-base@v1")
-    body = body.removeprefix(DATA_PREFIX)
-    body, colon, tier = body.partition(":")
-    name, at, version = body.partition("@")
-    check_name("dataset", name)
-    v = None
-    if at:
-        if not re.fullmatch(r"v[0-9]+", version) or int(version[1:]) < 1:
-            raise ConfigError(f"dataset reference {text!r} has version {version!r}; write it as @vN, "
-                              f"e.g. data:{name}@v1")
-        v = int(version[1:])
-    if colon and not TIER_RE.fullmatch(tier):
-        raise ConfigError(f"dataset reference {text!r} has an invalid tier {tier!r}; e.g. data:{name}@v1:800")
-    return DataRef(name, v, tier or None)
-
-
 def dumps(obj: Any) -> str:
     """Canonical JSON for catalog columns."""
     return json.dumps(obj, sort_keys=True, separators=(",", ":"))
-
-
-def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
-    """95% Wilson score interval of a success rate (used when the caller gives none)."""
-    if n <= 0:
-        return (0.0, 1.0)
-    p = successes / n
-    denom = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return (max(0.0, centre - half), min(1.0, centre + half))

@@ -1,4 +1,4 @@
-"""Human-readable views of the catalog: the model card and lineage trees.
+"""The model card: a checkpoint's catalog entry as a Hugging Face model card (pure text, no database).
 
 The model card (``README.md`` in every checkpoint folder) follows Hugging
 Face conventions (YAML front matter with ``library_name``, ``tags``,
@@ -6,27 +6,19 @@ Face conventions (YAML front matter with ``library_name``, ``tags``,
 checkpoint folder can be pushed as a model repository as it is.  Its body
 says what the model is for (task and shift), what it saw (datasets, versions,
 tiers, batch weights), how it did (evaluations pooled per shift and split)
-and where it came from (lineage).
-
-Ancestry (``nsl catalog lineage REF``) walks the parent chain: each node
-shows the datasets that training step used (version, tier, shift, episodes,
-batch weight) and the checkpoint's pooled evaluations; the last branch of a
-node is the checkpoint it was fine-tuned from.  Descendants (``--descendants``)
-draw the tree of every checkpoint that started from REF, directly or not.
+and where it came from (lineage).  The lineage trees of ``nsl catalog
+lineage`` are in :mod:`.lineage`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from nsl.errors import UnknownReferenceError
+from nsl.checkpoint_format import CONFIG_FILE, WEIGHTS_FILE
+from nsl.stats import wilson_interval
 
-from .folders import CONFIG_FILE, WEIGHTS_FILE
-from .records import CheckpointEntry, DatasetEntry, DataUse, EvaluationEntry, short_hash, wilson_interval
-
-if TYPE_CHECKING:
-    from .store import Catalog
+from .records import CheckpointEntry, DatasetEntry, DataUse, EvaluationEntry, short_hash
 
 LIBRARY_NAME = "nsl"
 BASE_TAGS = ("nsl", "robotics", "grasping", "reinforcement-learning", "qt-opt", "offline-rl", "continual-learning")
@@ -116,7 +108,7 @@ def render_model_card(entry: CheckpointEntry, ancestors: Sequence[CheckpointEntr
     out.append("## Lineage\n")
     out.append("Newest first; each checkpoint started from the weights of the one below it.\n")
     for c in [entry, *ancestors]:
-        uses = ", ".join(f"{u.dataset}@v{u.version}{':' + u.tier if u.tier else ''} x{u.weight:g}" for u in c.data)
+        uses = DataUse.mix(c.data)
         out.append(f"- `{c.ref}` (`{c.short_id}`), shift {c.shift}; data: {uses or 'none'}")
     last = ancestors[-1] if ancestors else entry
     if last.parent:
@@ -139,68 +131,3 @@ def render_model_card(entry: CheckpointEntry, ancestors: Sequence[CheckpointEntr
                f"- `{CONFIG_FILE}`: model and training configuration, enough to rebuild the network\n"
                "- `README.md`: this card, generated from the nsl catalog\n")
     return "\n".join(out)
-
-
-# ------------------------------------------------------------ lineage trees
-INDENT = "   "
-
-
-def _head(c: CheckpointEntry) -> str:
-    return f"{c.ref}  {c.short_id}  trained for {c.shift}, {c.created.replace('T', ' ').replace('Z', ' UTC')}"
-
-
-def _data_line(cat: Catalog, u: DataUse) -> str:
-    tier = f":{u.tier}" if u.tier else ""
-    try:
-        d = cat.dataset(u.dataset, u.version)
-        what = f"{d.shift_name}, {d.episodes} episodes"
-        if u.hash and d.hash != u.hash:
-            what += ", CONTENT CHANGED since training"
-    except UnknownReferenceError:
-        what = "removed from the catalog"
-    return f"data: {u.dataset}@v{u.version}{tier} ({what}), weight {u.weight:g}"
-
-
-def _eval_lines(cat: Catalog, c: CheckpointEntry) -> list[str]:
-    out = []
-    for r in pooled_results(cat.evaluations(c.id)):
-        out.append(f"eval: {r['shift']} ({r['split']} objects) {100 * r['rate']:.1f}% "
-                   f"[{100 * r['ci_low']:.1f}, {100 * r['ci_high']:.1f}] over {r['episodes']} episodes")
-    return out
-
-
-def format_lineage(cat: Catalog, ref: str, evaluations: bool = True) -> str:
-    """The ancestry of ``ref`` as an indented tree, newest checkpoint on top."""
-    chain = cat.lineage(ref)
-    lines: list[str] = []
-    for depth, c in enumerate(chain):
-        pad = INDENT * depth
-        lines.append(_head(c) if depth == 0 else f"{INDENT * (depth - 1)}└─ from {_head(c)}")
-        items = [_data_line(cat, u) for u in c.data] or ["data: none recorded"]
-        if evaluations:
-            items += _eval_lines(cat, c)
-        for item in items:
-            lines.append(f"{pad}├─ {item}")
-        if depth == len(chain) - 1:
-            tail = (f"from {c.parent[:12]} (removed from the catalog)" if c.parent else "from scratch (no parent)")
-            lines.append(f"{pad}└─ {tail}")
-    return "\n".join(lines)
-
-
-def format_descendants(cat: Catalog, ref: str) -> str:
-    """Every checkpoint fine-tuned from ``ref``, directly or through others, as a tree."""
-    root = cat.checkpoint(ref)
-    lines = [_head(root)]
-
-    def walk(c: CheckpointEntry, prefix: str) -> None:
-        kids = cat.children(c.id)
-        for i, k in enumerate(kids):
-            last = i == len(kids) - 1
-            uses = ", ".join(f"{u.dataset}@v{u.version}{':' + u.tier if u.tier else ''} x{u.weight:g}" for u in k.data)
-            lines.append(f"{prefix}{'└─ ' if last else '├─ '}{_head(k)}  data: {uses or 'none'}")
-            walk(k, prefix + ("   " if last else "│  "))
-
-    walk(root, "")
-    if len(lines) == 1:
-        lines.append("└─ (nothing was fine-tuned from it yet)")
-    return "\n".join(lines)

@@ -96,6 +96,22 @@ def _v1(conn: sqlite3.Connection) -> None:
     """)
 
 
+def _v2(conn: sqlite3.Connection) -> None:
+    """Checkpoint names: an entry may carry several names (a deterministic re-run registered under a new one)."""
+    _run_script(conn, """
+        CREATE TABLE checkpoint_names (          -- every name a checkpoint is registered under
+            seq        INTEGER PRIMARY KEY AUTOINCREMENT,
+            name       TEXT NOT NULL,
+            checkpoint TEXT NOT NULL,
+            created    TEXT NOT NULL,
+            UNIQUE (name, checkpoint)
+        );
+        CREATE INDEX checkpoint_names_name ON checkpoint_names (name, seq);
+        INSERT INTO checkpoint_names (name, checkpoint, created)
+            SELECT name, id, created FROM checkpoints ORDER BY seq
+    """)
+
+
 def _run_script(conn: sqlite3.Connection, script: str) -> None:
     """Run ``;``-separated statements inside the caller's transaction (executescript would commit it)."""
     for statement in script.split(";"):
@@ -103,7 +119,7 @@ def _run_script(conn: sqlite3.Connection, script: str) -> None:
             conn.execute(statement)
 
 
-MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _v1}
+MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _v1, 2: _v2}
 SCHEMA_VERSION = max(MIGRATIONS)
 
 

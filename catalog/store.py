@@ -2,8 +2,9 @@
 
 Entries are append-only.  Registering what is already there (same dataset
 name, version and hash; same checkpoint id; same evaluation) returns the
-existing entry; registering something different under an existing key is
-refused; nothing updates a row.  Tags are pointers and may move, but every
+existing entry (the same checkpoint under a new name gains that name as an
+alias); registering something different under an existing key is refused;
+nothing updates a row.  Tags are pointers and may move, but every
 move is a new row, so their history is kept too.
 
 Every write is one ``BEGIN IMMEDIATE`` transaction, so several collection,
@@ -25,7 +26,6 @@ Usage::
 from __future__ import annotations
 
 import functools
-import hashlib
 import json
 import sqlite3
 from collections.abc import Iterator, Mapping, Sequence
@@ -35,24 +35,27 @@ from typing import Any
 
 from nsl import workspace
 from nsl.errors import ConfigError, UnknownReferenceError, unknown
+from nsl.stats import wilson_interval
+from nsl.version import code_version as _current_code_version
 
 from . import schema
-from .render import render_model_card
 from .folders import (
-    CONFIG_FILE, WEIGHTS_FILE, checkpoint_id, encode_config, file_sha256, folder_checkpoint_id, folder_digests,
-    hash_tree, read_config, write_card, write_model_folder,
+    WEIGHTS_FILE, checkpoint_id, content_digests, encode_config, folder_checkpoint_id, folder_digests, hash_tree,
+    read_config, write_card, write_model_folder,
 )
 from .records import (
     CKPT_PREFIX, HEX_RE, RESERVED, CheckpointEntry, DatasetEntry, DataUse, EvaluationEntry, ResolvedData,
-    check_name, dumps, parse_checkpoint_ref, parse_data_ref, short_hash, wilson_interval,
+    check_name, dumps, parse_checkpoint_ref, parse_data_ref, short_hash,
 )
+from .render import render_model_card
+
+SHIPPED_BASE = "base"  # ckpt:base falls back to the checkpoint shipped in nsl/assets/base
+SHIPPED_RECORD = "command.json"  # the training command recorded beside the shipped weights
 
 
 @functools.cache
 def _code_version() -> str:
-    from nsl import code_version
-
-    return code_version()
+    return _current_code_version()
 
 
 class Catalog:
@@ -190,25 +193,24 @@ class Catalog:
         dataset in ``data``, else the parent's, else "base"); ``card_info``:
         extra model-card fields (``summary``, ``tags``, ``license``); ``dest``:
         the folder to write (default ``checkpoints/NAME/{STEP:08d}-{ID12}``).
+        A weights file is hard-linked into the folder, not copied (a copy is
+        made only across file systems), so registering a training run's
+        ``final/`` costs no second copy of the weights.
+
         Registering the same weights and config again returns the existing
-        entry.
+        entry; under another name (a deterministic re-run with the same data,
+        seed and parent) the name is added to that entry as an alias, so
+        ``ckpt:NEWNAME`` resolves to it.
         """
         check_name("checkpoint", name)
         config_bytes = encode_config(config)
-        if isinstance(weights, (bytes, bytearray, memoryview)):
-            wdigest = hashlib.sha256(weights).hexdigest()
-        elif Path(weights).is_file():
-            wdigest = file_sha256(Path(weights))
-        else:
-            raise ConfigError(f"weights file {weights} does not exist; pass safetensors bytes or an existing file")
-        files = {WEIGHTS_FILE: wdigest, CONFIG_FILE: hashlib.sha256(config_bytes).hexdigest()}
+        files = content_digests(weights, config_bytes)
         config = json.loads(config_bytes)  # as it will read back from config.json
         entry = self._new_checkpoint(checkpoint_id(weights, config), name, step, parent, data, shift, config,
                                      code_version, Path("."), files)
         existing = self._checkpoint_or_none(entry.id)
         if existing is not None:
-            self._check_same(existing, entry)
-            return existing
+            return self._same_or_alias(existing, entry)
         dest = Path(dest) if dest is not None else workspace.checkpoints_dir() / name / f"{step:08d}-{entry.short_id}"
         write_model_folder(dest, weights, config, self._card(entry, card_info))
         return self._insert_checkpoint(entry, dest)
@@ -229,8 +231,7 @@ class Catalog:
                                      read_config(folder), code_version, folder, files)
         existing = self._checkpoint_or_none(entry.id)
         if existing is not None:
-            self._check_same(existing, entry)
-            return existing
+            return self._same_or_alias(existing, entry)
         write_card(folder, self._card(entry, card_info))
         return self._insert_checkpoint(entry, folder)
 
@@ -257,14 +258,29 @@ class Catalog:
 
     @staticmethod
     def _check_same(existing: CheckpointEntry, new: CheckpointEntry) -> None:
+        """Refuse a registration of ``existing``'s content with another step, parent or data."""
         def key(e: CheckpointEntry) -> tuple:
-            return e.name, e.step, e.parent, [(u.dataset, u.version, u.weight, u.tier) for u in e.data]
+            return e.step, e.parent, [(u.dataset, u.version, u.weight, u.tier) for u in e.data]
 
         if key(existing) != key(new):
             raise ConfigError(
                 f"identical weights and config are already registered as ckpt:{existing.ref} "
-                f"({existing.short_id}) with other name, step, parent or data; entries are append-only, "
+                f"({existing.short_id}) with another step, parent or data; entries are append-only, "
                 f"so use ckpt:{existing.ref} instead")
+
+    def _same_or_alias(self, existing: CheckpointEntry, new: CheckpointEntry) -> CheckpointEntry:
+        """``existing`` again; under a new name (same step, parent and data) that name becomes its alias."""
+        self._check_same(existing, new)
+        if new.name not in self.names(existing.id):
+            with self.write() as c:
+                c.execute("INSERT OR IGNORE INTO checkpoint_names (name, checkpoint, created) VALUES (?, ?, ?)",
+                          (new.name, existing.id, schema.utc_now()))
+        return existing
+
+    def names(self, checkpoint: str) -> list[str]:
+        """Every name the checkpoint with id ``checkpoint`` is registered under, the first one first."""
+        return [n for (n,) in self.conn.execute("SELECT name FROM checkpoint_names WHERE checkpoint = ? ORDER BY seq",
+                                                (checkpoint,))]
 
     def _insert_checkpoint(self, e: CheckpointEntry, path: Path) -> CheckpointEntry:
         with self.write() as c:
@@ -277,9 +293,9 @@ class Catalog:
                            dumps(e.config), e.code_version, self._store_path(path), dumps(e.files), e.created))
                 c.executemany("INSERT OR IGNORE INTO checkpoint_data (checkpoint, dataset, version) VALUES (?, ?, ?)",
                               [(e.id, u.dataset, u.version) for u in e.data])
-        existing = self.checkpoint(e.id)
-        self._check_same(existing, e)
-        return existing
+                c.execute("INSERT OR IGNORE INTO checkpoint_names (name, checkpoint, created) VALUES (?, ?, ?)",
+                          (e.name, e.id, e.created))
+        return self._same_or_alias(self.checkpoint(e.id), e)  # another process may have registered it first
 
     def _checkpoint_row(self, r: tuple) -> CheckpointEntry:
         _seq, cid, name, step, parent, shift, data, config, code_version, path, files, created = r
@@ -297,8 +313,8 @@ class Catalog:
 
     def checkpoints(self, name: str | None = None) -> list[CheckpointEntry]:
         """Checkpoints in registration order (all, or those registered under ``name``)."""
-        q, a = ("SELECT * FROM checkpoints WHERE name = ? ORDER BY seq", (name,)) if name else (
-            "SELECT * FROM checkpoints ORDER BY seq", ())
+        q, a = ("SELECT c.* FROM checkpoints c JOIN checkpoint_names n ON n.checkpoint = c.id WHERE n.name = ? "
+                "ORDER BY n.seq", (name,)) if name else ("SELECT * FROM checkpoints ORDER BY seq", ())
         return [self._checkpoint_row(r) for r in self.conn.execute(q, a)]
 
     def children(self, checkpoint: str) -> list[CheckpointEntry]:
@@ -336,7 +352,10 @@ class Catalog:
         ancestors = self._ancestors(entry)
         datasets = {}
         for u in entry.data:
-            datasets[(u.dataset, u.version)] = self.dataset(u.dataset, u.version)
+            try:
+                datasets[(u.dataset, u.version)] = self.dataset(u.dataset, u.version)
+            except UnknownReferenceError:
+                pass  # removed, or never in this workspace (the shipped base's data)
         return render_model_card(entry, ancestors, datasets, self.evaluations(entry.id), info)
 
     def write_model_card(self, checkpoint: str, card_info: Mapping[str, Any] | None = None) -> Path:
@@ -405,7 +424,7 @@ class Catalog:
         check_name("tag", tag)
         if tag in RESERVED or tag.isdigit():
             raise ConfigError(f"tag {tag!r} would read as a selector (@best, @latest, @STEP); pick another name")
-        if self.conn.execute("SELECT 1 FROM checkpoints WHERE name = ?", (tag,)).fetchone():
+        if self.conn.execute("SELECT 1 FROM checkpoint_names WHERE name = ?", (tag,)).fetchone():
             raise ConfigError(f"tag {tag!r} is also a checkpoint name, and ckpt:{tag} means that name; pick another")
         entry = self.checkpoint(checkpoint)
         with self.write() as c:
@@ -429,13 +448,45 @@ class Catalog:
 _HINT = "list checkpoints with `nsl catalog ls checkpoints`"
 
 
-def _newest(cat: Catalog, where: str, args: tuple) -> CheckpointEntry | None:
-    r = cat.conn.execute(f"SELECT * FROM checkpoints WHERE {where} ORDER BY seq DESC LIMIT 1", args).fetchone()
+_NAMED = "SELECT c.* FROM checkpoints c JOIN checkpoint_names n ON n.checkpoint = c.id WHERE n.name = ?"
+
+
+def _newest(cat: Catalog, name: str, step: int | None = None) -> CheckpointEntry | None:
+    """The checkpoint most recently registered under ``name`` (at ``step``, if given)."""
+    q, args = (_NAMED, (name,)) if step is None else (_NAMED + " AND c.step = ?", (name, step))
+    r = cat.conn.execute(q + " ORDER BY n.seq DESC LIMIT 1", args).fetchone()
     return cat._checkpoint_row(r) if r else None
 
 
 def _names(cat: Catalog) -> list[str]:
-    return [n for (n,) in cat.conn.execute("SELECT DISTINCT name FROM checkpoints")]
+    return [n for (n,) in cat.conn.execute("SELECT DISTINCT name FROM checkpoint_names")]
+
+
+def _shipped_base(cat: Catalog, name: str) -> CheckpointEntry | None:
+    """Register the checkpoint shipped in ``nsl/assets/base`` as ``base`` if ``name`` asks for it and nothing else
+    in this catalog is called ``base``; None otherwise."""
+    folder = workspace.shipped_base_dir()
+    if name != SHIPPED_BASE or SHIPPED_BASE in cat.tags() or not (folder / WEIGHTS_FILE).is_file():
+        return None
+    config = read_config(folder)
+    record_file = folder / SHIPPED_RECORD
+    record = json.loads(record_file.read_text()) if record_file.is_file() else {}
+    uses = tuple(DataUse(d["dataset"], int(d["version"]), float(d["weight"]), d.get("tier"), d.get("hash", ""))
+                 for d in record.get("data", []))
+    entry = CheckpointEntry(
+        checkpoint_id(folder / WEIGHTS_FILE, config), SHIPPED_BASE, int(config.get("step", 0)), None,
+        record.get("target_shift") or "base", uses, config, str(config.get("code_version") or _code_version()),
+        ".", schema.utc_now(), content_digests(folder / WEIGHTS_FILE, encode_config(config)))
+    existing = cat._checkpoint_or_none(entry.id)
+    if existing is not None:
+        return cat._same_or_alias(existing, entry)
+    dest = workspace.checkpoints_dir() / SHIPPED_BASE / f"{entry.step:08d}-{entry.short_id}"
+    sources = ", ".join(f"`{u.dataset}@v{u.version}` x{u.weight:g}" for u in uses) or "unrecorded data"
+    info = {"summary": f"The base checkpoint shipped with nsl (`nsl/assets/base`), pre-trained from scratch on "
+                       f"{sources}; `{SHIPPED_RECORD}` there records the exact training command.",
+            "tags": ["base"]}
+    write_model_folder(dest, folder / WEIGHTS_FILE, config, cat._card(entry, info))
+    return cat._insert_checkpoint(entry, dest)
 
 
 def _by_id_prefix(cat: Catalog, prefix: str) -> CheckpointEntry | None:
@@ -473,10 +524,10 @@ def resolve_checkpoint(cat: Catalog, ref: str, shift: str | None = None, split: 
             return cat._checkpoint_row(r)
     parsed = parse_checkpoint_ref(ref)
     name, sel = parsed.name, parsed.selector
+    newest = _newest(cat, name) or _shipped_base(cat, name)
     if sel is None or sel == "latest":
-        entry = _newest(cat, "name = ?", (name,))
-        if entry is not None:
-            return entry
+        if newest is not None:
+            return newest
         if sel is None:
             tags = cat.tags()
             if name in tags:
@@ -484,13 +535,14 @@ def resolve_checkpoint(cat: Catalog, ref: str, shift: str | None = None, split: 
             if HEX_RE.fullmatch(name) and (entry := _by_id_prefix(cat, name)) is not None:
                 return entry
         raise unknown("checkpoint", name, [*_names(cat), *cat.tags()], _HINT)
-    if _newest(cat, "name = ?", (name,)) is None:
+    if newest is None:
         raise unknown("checkpoint", name, _names(cat), _HINT)
     if sel.isdigit():
-        entry = _newest(cat, "name = ? AND step = ?", (name, int(sel)))
+        entry = _newest(cat, name, int(sel))
         if entry is None:
-            steps = [s for (s,) in cat.conn.execute("SELECT DISTINCT step FROM checkpoints WHERE name = ? "
-                                                    "ORDER BY step", (name,))]
+            steps = [s for (s,) in cat.conn.execute("SELECT DISTINCT c.step FROM checkpoints c JOIN checkpoint_names n "
+                                                    "ON n.checkpoint = c.id WHERE n.name = ? ORDER BY c.step",
+                                                    (name,))]
             shown = ", ".join(map(str, steps[:10])) + (", ..." if len(steps) > 10 else "")
             raise UnknownReferenceError(f"checkpoint {name!r} has no step {sel}; its steps are {shown} "
                                         f"(e.g. ckpt:{name}@{steps[-1]}, or ckpt:{name}@latest)")
@@ -503,7 +555,7 @@ def resolve_checkpoint(cat: Catalog, ref: str, shift: str | None = None, split: 
         raise unknown("tag", sel, own or tags,
                       f"selectors are @STEP, @best, @latest or @TAG; tag with `nsl catalog tag ckpt:{name}@STEP TAG`")
     entry = cat.checkpoint(tags[sel])
-    if entry.name != name:
+    if name not in cat.names(entry.id):
         raise ConfigError(f"tag {sel!r} points to ckpt:{entry.ref}, not to a checkpoint of {name!r}; "
                           f"write ckpt:{sel} for the tagged checkpoint")
     return entry
@@ -515,12 +567,13 @@ def best_checkpoint(cat: Catalog, name: str, shift: str | None = None,
 
     The score is ``{"shift", "split", "successes", "episodes", "rate"}``.
     """
-    newest = _newest(cat, "name = ?", (name,))
+    newest = _newest(cat, name) or _shipped_base(cat, name)
     if newest is None:
         raise unknown("checkpoint", name, _names(cat), _HINT)
     shift = shift or newest.shift
-    q = ("SELECT c.seq, c.id, SUM(e.successes), SUM(e.episodes) FROM checkpoints c "
-         "JOIN evaluations e ON e.checkpoint = c.id WHERE c.name = ? AND e.shift = ?")
+    q = ("SELECT n.seq, c.id, SUM(e.successes), SUM(e.episodes) FROM checkpoints c "
+         "JOIN checkpoint_names n ON n.checkpoint = c.id "
+         "JOIN evaluations e ON e.checkpoint = c.id WHERE n.name = ? AND e.shift = ?")
     args: list = [name, shift]
     if split is not None:
         q += " AND e.split = ?"
@@ -528,7 +581,8 @@ def best_checkpoint(cat: Catalog, name: str, shift: str | None = None,
     rows = cat.conn.execute(q + " GROUP BY c.id", args).fetchall()
     if not rows:
         shifts = [s for (s,) in cat.conn.execute(
-            "SELECT DISTINCT e.shift FROM evaluations e JOIN checkpoints c ON e.checkpoint = c.id WHERE c.name = ?",
+            "SELECT DISTINCT e.shift FROM evaluations e JOIN checkpoint_names n ON e.checkpoint = n.checkpoint "
+            "WHERE n.name = ?",
             (name,))]
         where = f"shift {shift!r}" + (f" ({split} objects)" if split else "")
         also = f"; it was evaluated on: {', '.join(sorted(shifts))} (use ckpt:{name}@best:SHIFT)" if shifts else ""

@@ -43,6 +43,7 @@ import gymnasium as gym
 import numpy as np
 
 from nsl.errors import ConfigError
+from nsl.keys import ACTION_DIM, STATE_DIM  # noqa: F401  (re-exported by nsl.collectors)
 
 from .render import SceneRenderer  # sets MUJOCO_GL before mujoco is imported
 
@@ -56,8 +57,6 @@ from .shifts import ShiftSpec, parse_shift  # noqa: E402
 
 ENV_VERSION = "nsl-grasp-v3"  # v2: 6-d gripper state, camera framed on the bin; v3: wrist camera, 7 cm jaw
 CONTROL_MODES = ("auto_descent", "full")
-ACTION_DIM = 6
-STATE_DIM = 6
 
 
 @dataclass(frozen=True)

@@ -24,8 +24,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from nsl.errors import ConfigError, unknown
-
-from .env import ACTION_DIM
+from nsl.keys import ACTION_DIM
 
 
 class Policy(Protocol):

@@ -81,8 +81,8 @@ def features(image_size: int) -> dict[str, dict[str, Any]]:
     return {
         keys.OBS_IMAGE: {"dtype": "image", "shape": [image_size, image_size, 3],
                          "names": ["height", "width", "channels"]},
-        keys.OBS_STATE: {"dtype": "float32", "shape": [len(keys.STATE_NAMES)], "names": list(keys.STATE_NAMES)},
-        keys.ACTION: {"dtype": "float32", "shape": [len(keys.ACTION_NAMES)], "names": list(keys.ACTION_NAMES)},
+        keys.OBS_STATE: {"dtype": "float32", "shape": [keys.STATE_DIM], "names": list(keys.STATE_NAMES)},
+        keys.ACTION: {"dtype": "float32", "shape": [keys.ACTION_DIM], "names": list(keys.ACTION_NAMES)},
         keys.REWARD: {"dtype": "float32", **scalar},
         keys.DONE: {"dtype": "bool", **scalar},
         keys.SUCCESS: {"dtype": "bool", **scalar},

@@ -198,9 +198,9 @@ class Sampler:
         b, s = int(batch_size), self.image_size
         out = {
             keys.OBS_IMAGE: np.empty((b, s, s, 3), np.uint8), keys.NEXT_OBS_IMAGE: np.empty((b, s, s, 3), np.uint8),
-            keys.OBS_STATE: np.empty((b, len(keys.STATE_NAMES)), np.float32),
-            keys.NEXT_OBS_STATE: np.empty((b, len(keys.STATE_NAMES)), np.float32),
-            keys.ACTION: np.empty((b, len(keys.ACTION_NAMES)), np.float32),
+            keys.OBS_STATE: np.empty((b, keys.STATE_DIM), np.float32),
+            keys.NEXT_OBS_STATE: np.empty((b, keys.STATE_DIM), np.float32),
+            keys.ACTION: np.empty((b, keys.ACTION_DIM), np.float32),
             keys.REWARD: np.empty(b, np.float32), keys.DONE: np.empty(b, np.float32),
         }
         if self.n_step > 1:

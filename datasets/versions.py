@@ -20,55 +20,25 @@ import json
 import os
 import re
 import shutil
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from nsl import refs
 from nsl.errors import ConfigError, CorruptDataError, unknown
-from nsl.workspace import atomic_write_json, datasets_dir
+from nsl.refs import DataRef, parse_data_ref
+from nsl.workspace import atomic_write_json, datasets_dir, file_sha256
 
 from . import layout
 
-NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
-REF_RE = re.compile(r"^(?:data:)?(?P<name>[^@:]+)(?:@v(?P<version>\d+))?(?::(?P<tier>\d+))?$")
 STANDARD_TIERS = (25, 50, 100, 200, 400, 800)  # the study's target-data sizes (NOTES, Table 5.2)
 HASH_PREFIX = "sha256:"
 
-
-@dataclass(frozen=True)
-class Ref:
-    """A parsed dataset reference."""
-
-    name: str
-    version: int | None = None  # None: the latest version
-    tier: int | None = None  # None: all episodes; K: the first K episodes
-
-    def __str__(self) -> str:
-        v = f"@v{self.version}" if self.version is not None else ""
-        t = f":{self.tier}" if self.tier is not None else ""
-        return f"{self.name}{v}{t}"
+Ref = DataRef  # a parsed reference (the grammar lives in nsl.refs, shared with the catalog)
+parse_ref = parse_data_ref
 
 
 def check_name(name: str) -> str:
-    if not NAME_RE.match(name or ""):
-        raise ConfigError(f"dataset name {name!r} is invalid; use letters, digits, '.', '_' and '-' "
-                          "(e.g. grasp-harsh)")
-    return name
-
-
-def parse_ref(text: str) -> Ref:
-    """Parse ``[data:]NAME[@vN][:K]``."""
-    m = REF_RE.match(text.strip()) if isinstance(text, str) else None
-    if not m:
-        raise ConfigError(f"dataset reference {text!r} is malformed; write NAME, NAME@v2 or NAME@v2:100")
-    name = check_name(m["name"])
-    tier = int(m["tier"]) if m["tier"] is not None else None
-    if tier is not None and tier < 1:
-        raise ConfigError(f"dataset reference {text!r}: tier {tier} must be at least 1 episode")
-    version = int(m["version"]) if m["version"] is not None else None
-    if version is not None and version < 1:
-        raise ConfigError(f"dataset reference {text!r}: versions start at v1")
-    return Ref(name, version, tier)
+    return refs.check_name("dataset", name)
 
 
 def dataset_root(name: str) -> Path:
@@ -83,7 +53,8 @@ def dataset_names() -> list[str]:
     root = datasets_dir()
     if not root.is_dir():
         return []
-    return sorted(p.name for p in root.iterdir() if p.is_dir() and NAME_RE.match(p.name) and list_versions(p.name))
+    return sorted(p.name for p in root.iterdir()
+                  if p.is_dir() and refs.NAME_RE.fullmatch(p.name) and list_versions(p.name))
 
 
 def list_versions(name: str) -> list[int]:
@@ -112,14 +83,6 @@ def resolve(ref: str | Ref) -> tuple[Ref, Path]:
 
 
 # -- manifests and hashes --------------------------------------------------------------------------------------------
-
-def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
 
 def content_files(root: Path) -> list[str]:
     """Relative paths of every file of a version except the manifest (and temporary files)."""

@@ -9,7 +9,7 @@ written first, so the data file's presence marks the pair as complete.
 
 Episodes are duck-typed records (``nsl.collectors.Episode`` fits)::
 
-    images (T, H, W, 3) uint8, states (T, len(STATE_NAMES)), actions (T, 6), rewards (T,),
+    images (T, H, W, 3) uint8, states (T, STATE_DIM), actions (T, ACTION_DIM), rewards (T,),
     terminated, truncated, success
 
 Frame ``t`` is the observation before action ``t``; ``next.done`` is true only on
@@ -75,8 +75,8 @@ def episode_frames(ep: EpisodeLike, episode_index: int, first_index: int, task_i
     last[-1] = True
     frames = {
         keys.OBS_IMAGE: images,
-        keys.OBS_STATE: np.asarray(ep.states, dtype=np.float32).reshape(t, len(keys.STATE_NAMES)),
-        keys.ACTION: np.asarray(ep.actions, dtype=np.float32).reshape(t, len(keys.ACTION_NAMES)),
+        keys.OBS_STATE: np.asarray(ep.states, dtype=np.float32).reshape(t, keys.STATE_DIM),
+        keys.ACTION: np.asarray(ep.actions, dtype=np.float32).reshape(t, keys.ACTION_DIM),
         keys.REWARD: np.asarray(ep.rewards, dtype=np.float32).reshape(t),
         keys.DONE: last & bool(ep.terminated),
         keys.SUCCESS: last & bool(ep.success),

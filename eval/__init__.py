@@ -2,10 +2,9 @@
 
 Public surface (other folders and the CLI import these from ``nsl.eval`` only)::
 
-    wilson_interval, SuccessRate, EvalConfig, evaluate, run_eval_episodes, markdown_table   # success rates
-    evaluate_outcomes, success_rate_from_outcomes
+    wilson_interval, SuccessRate, markdown_table, success_rate_from_outcomes               # statistics
+    EvalConfig, evaluate, run_eval_episodes, evaluate_outcomes                              # in the simulator
     compare_paired, PairedComparison, mcnemar_exact, paired_difference_interval            # two policies
-    welch_t_test, WelchResult
     EarlyStopping, EarlyStopConfig, EarlyStopMonitor, simulator_scorer, CRITERIA           # early stopping
     soft_opc, q_ranking_auc, td_error, offline_scores, held_out_episodes
     choose_steps, CriterionChoice, choices_table
@@ -13,33 +12,60 @@ Public surface (other folders and the CLI import these from ``nsl.eval`` only)::
     Rate, CurveRow, PerformanceMatrix, TierRow, TierResults, read_curve, write_curve       # records
     write_report, ReportResult, tiers_table, matrix_table, plot_curve, plot_matrix, plot_tiers
 
+Each name is loaded from its module on first use (PEP 562), so the statistics
+and records import no simulator: ``from nsl.eval import wilson_interval``
+loads neither MuJoCo nor PyTorch; ``evaluate`` and the early-stopping monitor
+load ``nsl.collectors`` when they are first asked for.
+
 ``eval/`` may drive ``nsl.collectors`` with policies it is given; it never
 imports ``nsl.learners`` (Q-values for the offline criteria come from the caller).
 """
 
-from .continual import ContinualMetrics, continual_metrics, curve_auc
-from .early_stopping import (CRITERIA, CriterionChoice, EarlyStopConfig, EarlyStopMonitor, EarlyStopping,
-                             choices_table, choose_steps, held_out_episodes, load_early_stop, offline_scores,
-                             q_ranking_auc, simulator_scorer, soft_opc, td_error)
-from .paired import (PairedComparison, WelchResult, compare_paired, mcnemar_exact, paired_difference_interval,
-                     welch_t_test)
-from .plots import plot_curve, plot_matrix, plot_tiers
-from .records import (CURVE_FILE, EARLY_STOP_FILE, MATRIX_FILE, REPORT_DIR, TIERS_FILE, CurveRow,
-                      PerformanceMatrix, Rate, TierResults, TierRow, read_curve, read_eval_jsonl, write_curve)
-from .report import ReportResult, matrix_table, tiers_table, write_report
-from .success import (EvalConfig, SuccessRate, evaluate, evaluate_outcomes, markdown_table, run_eval_episodes,
-                      success_rate_from_outcomes, wilson_interval)
+from __future__ import annotations
 
-__all__ = [
-    "EvalConfig", "SuccessRate", "evaluate", "evaluate_outcomes", "markdown_table", "run_eval_episodes",
-    "success_rate_from_outcomes", "wilson_interval",
-    "PairedComparison", "WelchResult", "compare_paired", "mcnemar_exact", "paired_difference_interval",
-    "welch_t_test",
-    "CRITERIA", "CriterionChoice", "EarlyStopConfig", "EarlyStopMonitor", "EarlyStopping", "choices_table",
-    "choose_steps", "held_out_episodes", "load_early_stop", "offline_scores", "q_ranking_auc", "simulator_scorer",
-    "soft_opc", "td_error",
-    "ContinualMetrics", "continual_metrics", "curve_auc",
-    "CURVE_FILE", "EARLY_STOP_FILE", "MATRIX_FILE", "REPORT_DIR", "TIERS_FILE", "CurveRow", "PerformanceMatrix",
-    "Rate", "TierResults", "TierRow", "read_curve", "read_eval_jsonl", "write_curve",
-    "ReportResult", "matrix_table", "tiers_table", "write_report", "plot_curve", "plot_matrix", "plot_tiers",
-]
+import importlib
+from typing import TYPE_CHECKING, Any
+
+_EXPORTS = {
+    "stats": ("SuccessRate", "markdown_table", "success_rate_from_outcomes", "wilson_interval"),
+    "success": ("EvalConfig", "evaluate", "evaluate_outcomes", "run_eval_episodes"),
+    "paired": ("PairedComparison", "compare_paired", "mcnemar_exact", "paired_difference_interval"),
+    "early_stopping": ("CRITERIA", "CriterionChoice", "EarlyStopConfig", "EarlyStopMonitor", "EarlyStopping",
+                       "choices_table", "choose_steps", "held_out_episodes", "load_early_stop", "offline_scores",
+                       "q_ranking_auc", "simulator_scorer", "soft_opc", "td_error"),
+    "continual": ("ContinualMetrics", "continual_metrics", "curve_auc"),
+    "records": ("CURVE_FILE", "EARLY_STOP_FILE", "MATRIX_FILE", "REPORT_DIR", "TIERS_FILE", "CurveRow",
+                "PerformanceMatrix", "Rate", "TierResults", "TierRow", "read_curve", "read_eval_jsonl", "write_curve"),
+    "report": ("ReportResult", "matrix_table", "tiers_table", "write_report"),
+    "plots": ("plot_curve", "plot_matrix", "plot_tiers"),
+}
+_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
+__all__ = sorted(_MODULE_OF)
+
+
+def __getattr__(name: str) -> Any:
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module 'nsl.eval' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+if TYPE_CHECKING:  # static analysers see the eager imports
+    from .continual import ContinualMetrics, continual_metrics, curve_auc  # noqa: F401
+    from .early_stopping import (CRITERIA, CriterionChoice, EarlyStopConfig, EarlyStopMonitor,  # noqa: F401
+                                 EarlyStopping, choices_table, choose_steps, held_out_episodes, load_early_stop,
+                                 offline_scores, q_ranking_auc, simulator_scorer, soft_opc, td_error)
+    from .paired import PairedComparison, compare_paired, mcnemar_exact, paired_difference_interval  # noqa: F401
+    from .plots import plot_curve, plot_matrix, plot_tiers  # noqa: F401
+    from .records import (CURVE_FILE, EARLY_STOP_FILE, MATRIX_FILE, REPORT_DIR, TIERS_FILE,  # noqa: F401
+                          CurveRow, PerformanceMatrix, Rate, TierResults, TierRow, read_curve, read_eval_jsonl,
+                          write_curve)
+    from .report import ReportResult, matrix_table, tiers_table, write_report  # noqa: F401
+    from .stats import SuccessRate, markdown_table, success_rate_from_outcomes, wilson_interval  # noqa: F401
+    from .success import EvalConfig, evaluate, evaluate_outcomes, run_eval_episodes  # noqa: F401

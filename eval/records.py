@@ -28,7 +28,7 @@ from typing import Any
 from nsl.errors import ConfigError, CorruptDataError
 from nsl.workspace import atomic_write_bytes, atomic_write_json
 
-from .success import SuccessRate, wilson_interval
+from .stats import SuccessRate, wilson_interval
 
 CURVE_FILE = "curve.csv"
 EARLY_STOP_FILE = "early_stop.json"

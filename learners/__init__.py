@@ -7,7 +7,7 @@ Public surface (other folders import these from ``nsl.learners`` only)::
     cem_maximize, noise_from_generator, noise_from_rngs
     Learner, update, bellman_target                    # one QT-Opt step
     train, TrainResult                                 # the loop: pre-training and fine-tuning
-    Sampler, ArraySampler, MixtureSampler              # the data contract and in-memory samplers
+    Sampler, ArraySampler                              # the data contract and an in-memory sampler
     Checkpoint, load_checkpoint, save_checkpoint, checkpoint_config, checkpoint_id, read_config
     CEMPolicy, load_policy                             # a checkpoint acting in the collectors
 
@@ -21,7 +21,7 @@ from .config import METHODS, CemConfig, NetConfig, TrainConfig
 from .networks import QNetwork
 from .policy import CEMPolicy, load_policy
 from .qtopt import Learner, bellman_target, update
-from .sampler import ArraySampler, MixtureSampler, Sampler
+from .sampler import ArraySampler, Sampler
 from .train import FINAL_DIR, TrainResult, train
 
 __all__ = [
@@ -29,6 +29,6 @@ __all__ = [
     "CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "CONFIG_FILE", "MODEL_FILE", "TRAINER_FILE", "Checkpoint",
     "checkpoint_config", "checkpoint_id", "load_checkpoint", "read_config", "save_checkpoint",
     "METHODS", "CemConfig", "NetConfig", "TrainConfig", "QNetwork", "CEMPolicy", "load_policy",
-    "Learner", "bellman_target", "update", "ArraySampler", "MixtureSampler", "Sampler",
+    "Learner", "bellman_target", "update", "ArraySampler", "Sampler",
     "FINAL_DIR", "TrainResult", "train",
 ]

@@ -19,7 +19,9 @@ from collections.abc import Callable, Sequence
 import numpy as np
 import torch
 
-from .config import ACTION_DIM, CemConfig, NetConfig
+from nsl.keys import ACTION_DIM
+
+from .config import CemConfig, NetConfig
 
 
 def noise_shape(batch: int, dims: int, cfg: CemConfig) -> tuple[int, int, int, int]:

@@ -1,6 +1,7 @@
-"""Checkpoints: a folder with the weights in safetensors and a JSON config beside them.
+"""Checkpoints: the learner's schema on top of the shared folder format (``nsl.checkpoint_format``).
 
-Layout of one checkpoint folder::
+The folder format (file names, atomic writes, the content-hash id) belongs to
+``nsl.checkpoint_format``, which the catalog uses too.  Here the files mean::
 
     model.safetensors     the online network's weights (all columns)
     config.json           format and version, architecture, training config,
@@ -9,20 +10,13 @@ Layout of one checkpoint folder::
     trainer_state.pt      optional: target networks, optimiser and random
                           states, only needed to resume the run that wrote it
 
-A checkpoint loads from the first two files alone.  A folder is written under
-a temporary name and renamed into place, so a checkpoint either exists
-completely or not at all.  :func:`checkpoint_id` is a content hash (weights
-and config) for the catalog.
+A checkpoint loads from the first two files alone, and :func:`read_config`
+refuses a ``config.json`` this learner cannot interpret.
 """
 
 from __future__ import annotations
 
-import hashlib
 import io
-import json
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -30,18 +24,18 @@ from typing import Any
 import safetensors.torch
 import torch
 
-import nsl
-from nsl.errors import ConfigError, CorruptDataError, IncompatibleVersionError, UnknownReferenceError
-from nsl.workspace import atomic_write_bytes
+from nsl import checkpoint_format as fmt
+from nsl.checkpoint_format import CONFIG_FILE, TRAINER_FILE
+from nsl.checkpoint_format import WEIGHTS_FILE as MODEL_FILE
+from nsl.errors import ConfigError, CorruptDataError, IncompatibleVersionError
+from nsl.version import __version__, code_version
+from nsl.workspace import atomic_write_json as write_json  # noqa: F401  (nsl.learners.train writes run.json with it)
 
 from .config import NetConfig, TrainConfig
 from .networks import QNetwork
 
 CHECKPOINT_FORMAT = "nsl-qtopt-checkpoint"
 CHECKPOINT_VERSION = 1
-MODEL_FILE = "model.safetensors"
-CONFIG_FILE = "config.json"
-TRAINER_FILE = "trainer_state.pt"
 REQUIRED_KEYS = ("format", "version", "architecture", "training", "method", "data", "parent", "code_version", "step")
 
 
@@ -67,6 +61,7 @@ class Checkpoint:
 
     @property
     def lr(self) -> float:
+        """The learning rate the checkpoint was trained with (fine-tuning starts from 25% of it)."""
         return float(self.config["training"]["lr"])
 
     @property
@@ -85,50 +80,28 @@ def checkpoint_config(net: QNetwork, *, training: TrainConfig, method: str, data
         "method": method,
         "data": data,
         "parent": parent,
-        "code_version": nsl.code_version(),
+        "code_version": code_version(),
         "step": int(step),
     }
 
 
 def save_checkpoint(path: Path, net: QNetwork, config: dict[str, Any], trainer_state: dict | None = None) -> Path:
     """Write a checkpoint folder at ``path`` atomically (replacing one already there)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
-    try:
-        weights = {k: v.detach().contiguous() for k, v in net.state_dict().items()}
-        (tmp / MODEL_FILE).write_bytes(safetensors.torch.save(weights, metadata={"format": CHECKPOINT_FORMAT}))
-        (tmp / CONFIG_FILE).write_text(json.dumps(config, indent=2, sort_keys=True) + "\n")
-        if trainer_state is not None:
-            buf = io.BytesIO()
-            torch.save(trainer_state, buf)
-            (tmp / TRAINER_FILE).write_bytes(buf.getvalue())
-        for f in tmp.iterdir():
-            with open(f, "rb") as fh:
-                os.fsync(fh.fileno())
-        if path.exists():
-            shutil.rmtree(path)
-        os.replace(tmp, path)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return path
+    weights = {k: v.detach().contiguous() for k, v in net.state_dict().items()}
+    files: dict[str, bytes] = {MODEL_FILE: safetensors.torch.save(weights, metadata={"format": CHECKPOINT_FORMAT}),
+                               CONFIG_FILE: fmt.encode_config(config)}
+    if trainer_state is not None:
+        buf = io.BytesIO()
+        torch.save(trainer_state, buf)
+        files[TRAINER_FILE] = buf.getvalue()
+    fmt.write_folder(Path(path), files, replace=True)
+    return Path(path)
 
 
 def read_config(path: Path) -> dict[str, Any]:
-    """The validated ``config.json`` of the checkpoint at ``path``."""
+    """The ``config.json`` of the checkpoint at ``path``, checked against the learner's schema."""
     path = Path(path)
-    if not path.is_dir():
-        raise UnknownReferenceError(f"no checkpoint folder at {path}; pass the folder that holds {MODEL_FILE} and {CONFIG_FILE}")
-    cfg_file = path / CONFIG_FILE
-    if not cfg_file.is_file():
-        raise CorruptDataError(f"checkpoint {path} has no {CONFIG_FILE}; it is incomplete or not an nsl checkpoint")
-    try:
-        config = json.loads(cfg_file.read_text())
-    except (UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise CorruptDataError(f"checkpoint {path}: {CONFIG_FILE} is not valid JSON ({e}); restore it or retrain") from None
-    if not isinstance(config, dict):
-        raise CorruptDataError(f"checkpoint {path}: {CONFIG_FILE} must hold a JSON object, not {type(config).__name__}")
+    config = fmt.read_config(path)
     missing = [k for k in REQUIRED_KEYS if k not in config]
     if missing:
         raise CorruptDataError(f"checkpoint {path}: {CONFIG_FILE} lacks key(s) {missing}; it is incomplete or from "
@@ -138,7 +111,7 @@ def read_config(path: Path) -> dict[str, Any]:
     version = config["version"]
     if not isinstance(version, int) or version > CHECKPOINT_VERSION or version < 1:
         raise IncompatibleVersionError(f"checkpoint {path} has format version {version!r}; this nsl "
-                                       f"({nsl.__version__}) reads version {CHECKPOINT_VERSION}; use a matching nsl")
+                                       f"({__version__}) reads version {CHECKPOINT_VERSION}; use a matching nsl")
     for section, parse in (("architecture", NetConfig.from_dict), ("training", TrainConfig.from_dict)):
         if not isinstance(config[section], dict):
             raise CorruptDataError(f"checkpoint {path}: {CONFIG_FILE} '{section}' must be an object")
@@ -189,15 +162,8 @@ def load_trainer_state(path: Path) -> dict | None:
 
 
 def checkpoint_id(path: Path) -> str:
-    """Content hash of a checkpoint: sha256 over its weights file and its canonical config."""
-    path = Path(path)
+    """Content hash of the checkpoint folder ``path`` (``nsl.checkpoint_format.checkpoint_id``)."""
     config = read_config(path)
-    h = hashlib.sha256()
-    h.update((path / MODEL_FILE).read_bytes())
-    h.update(b"\0")
-    h.update(json.dumps(config, sort_keys=True, separators=(",", ":")).encode())
-    return h.hexdigest()
-
-
-def write_json(path: Path, obj: Any) -> None:
-    atomic_write_bytes(Path(path), (json.dumps(obj, indent=2, sort_keys=True) + "\n").encode())
+    if not (Path(path) / MODEL_FILE).is_file():
+        raise CorruptDataError(f"checkpoint {path} has no {MODEL_FILE}; it is incomplete")
+    return fmt.checkpoint_id(Path(path) / MODEL_FILE, config)

@@ -18,9 +18,7 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 from nsl.errors import ConfigError
-
-ACTION_DIM = 6  # (dx, dy, dz, dyaw, close, terminate), as in nsl.keys.ACTION_NAMES
-STATE_DIM = 6  # default state length: opening, height, x, y, sin yaw, cos yaw (nsl.keys.STATE_NAMES)
+from nsl.keys import ACTION_DIM, STATE_DIM
 
 POOLS = ("flatten", "max", "spatial")
 NORMS = ("none", "group")

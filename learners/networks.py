@@ -35,7 +35,10 @@ from torch import nn
 
 from .config import NetConfig
 
-HEAD_PREFIXES = ("state_fc", "state_proj", "spatial_fc", "action_fc", "hidden_fcs", "out", "lateral.state", "lateral.hidden", "lateral.out")
+# A column's head: every layer after the conv trunk, including the laterals into it.  The order is the order in
+# which ``new_head`` re-draws them (it fixes which random numbers each layer gets).
+HEAD_PREFIXES = ("state_fc", "action_fc", "hidden_fcs", "out", "state_proj", "spatial_fc",
+                 "lateral.state", "lateral.hidden", "lateral.out")
 
 
 def coordinate_planes(n: int) -> torch.Tensor:
@@ -170,22 +173,27 @@ class QNetwork(nn.Module):
         return [p for p in self.parameters() if p.requires_grad]
 
 
+def head_rank(name: str) -> int | None:
+    """The index in HEAD_PREFIXES of the head layer a parameter or module belongs to; None for the trunk.
+
+    ``name`` is relative to a column (``hidden_fcs.0.weight``) or to the network
+    (``columns.1.hidden_fcs.0.weight``).
+    """
+    rest = name.split(".", 2)[2] if name.startswith("columns.") else name
+    return next((i for i, p in enumerate(HEAD_PREFIXES) if rest == p or rest.startswith(p)), None)
+
+
 def is_head_parameter(name: str) -> bool:
     """True for a parameter of a column's head (everything after the conv trunk)."""
-    rest = name.split(".", 2)[2] if name.startswith("columns.") else name
-    return rest.startswith(HEAD_PREFIXES)
+    return head_rank(name) is not None
 
 
 def reinit_head(net: QNetwork) -> None:
-    """Re-initialise the last column's head (``new_head``); the trunk keeps its weights."""
+    """Re-initialise the last column's head (``new_head``): every layer :func:`is_head_parameter` names."""
     col = net.columns[-1]
-    mods = [col.state_fc, col.action_fc, *col.hidden_fcs, col.out]
-    if col.pool == "spatial":
-        mods += [col.state_proj, col.spatial_fc]
-    for name, lat in col.lateral.items():
-        if not name.startswith("conv"):
-            mods.extend(lat)
-    for m in mods:
+    layers = [(rank, m) for name, m in col.named_modules()
+              if hasattr(m, "reset_parameters") and (rank := head_rank(name)) is not None]
+    for _, m in sorted(layers, key=lambda item: item[0]):  # stable: a layer's parts keep their order
         m.reset_parameters()
 
 

@@ -51,13 +51,13 @@ class Learner:
     lagged: QNetwork
     optimizer: torch.optim.Optimizer
     generator: torch.Generator  # augmentation and CEM noise
-    lr: float
 
     @classmethod
     def create(cls, net: QNetwork, lr: float, cfg: TrainConfig) -> Learner:
+        """A learner whose Adam starts at ``lr`` (the loop sets each step's rate from ``cfg.lr_at``)."""
         opt = torch.optim.Adam(net.trainable_parameters(), lr=lr, weight_decay=cfg.weight_decay)
         gen = torch.Generator().manual_seed(cfg.seed)
-        return cls(net, clone_frozen(net), clone_frozen(net), opt, gen, lr)
+        return cls(net, clone_frozen(net), clone_frozen(net), opt, gen)
 
     def state_dict(self) -> dict:
         return {"online": self.online.state_dict(), "polyak": self.polyak.state_dict(),

@@ -1,4 +1,4 @@
-"""The transition-sampler contract the learner trains from, and two in-memory samplers.
+"""The transition-sampler contract the learner trains from, and an in-memory sampler.
 
 A sampler is any object with::
 
@@ -6,19 +6,21 @@ A sampler is any object with::
     describe() -> dict          # data versions and weights, recorded in checkpoints
 
 ``sample`` returns a batch keyed by ``nsl.keys``: ``OBS_IMAGE`` (B, H, W, 3)
-uint8, ``OBS_STATE`` (B, 2) float32, ``ACTION`` (B, 6) float32, ``REWARD``
-(B,) float32, ``DONE`` (B,) float32, ``NEXT_OBS_IMAGE`` and
-``NEXT_OBS_STATE``.  All randomness comes from ``rng`` (owned, saved and
-restored by the trainer), so a sampler holds no random state of its own.
+uint8, ``OBS_STATE`` (B, STATE_DIM) float32, ``ACTION`` (B, ACTION_DIM)
+float32, ``REWARD`` (B,) float32, ``DONE`` (B,) float32, ``NEXT_OBS_IMAGE``
+and ``NEXT_OBS_STATE`` (and ``DISCOUNT`` for n-step transitions).  All
+randomness comes from ``rng`` (owned, saved and restored by the trainer), so
+a sampler holds no random state of its own.
 
-The dataset loader (``nsl.datasets.api``) provides samplers over stored
-datasets; :class:`ArraySampler` wraps numpy arrays (tests, scratch
-experiments) and :class:`MixtureSampler` mixes samplers by weight.
+Mixing sources by weight (the study's 50/50 base and target batches) is the
+dataset loader's job: ``nsl.datasets.api.make_sampler([(ref, weight), ...])``
+is the one implementation.  :class:`ArraySampler` wraps numpy arrays of a
+single source (tests, benchmarks, small experiments).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from typing import Any, Protocol
 
 import numpy as np
@@ -31,6 +33,8 @@ BATCH_KEYS = (keys.OBS_IMAGE, keys.OBS_STATE, keys.ACTION, keys.REWARD, keys.DON
 
 
 class Sampler(Protocol):
+    """What :func:`nsl.learners.train` draws its batches from (see the module docstring)."""
+
     def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]: ...
 
     def describe(self) -> dict[str, Any]: ...
@@ -51,7 +55,7 @@ class ArraySampler:
             raise ConfigError(f"images must be uint8 (N, H, W, 3); got {images.dtype} {images.shape}")
         if states.ndim != 2:
             raise ConfigError(f"states must be (N, state_dim); got {states.shape}")
-        for label, arr, shape in (("states", states, (n, states.shape[1])), ("actions", actions, (n, 6)), ("rewards", rewards, (n,)),
+        for label, arr, shape in (("states", states, (n, states.shape[1])), ("actions", actions, (n, keys.ACTION_DIM)), ("rewards", rewards, (n,)),
                                   ("dones", dones, (n,)), ("next_index", next_index, (n,))):
             if arr.shape != shape:
                 raise ConfigError(f"{label} has shape {arr.shape}; expected {shape} to match {n} images")
@@ -123,36 +127,3 @@ class ArraySampler:
         rewarded = float(self.rewards[self.indices].sum())
         return {"sources": [{"name": self.name, "kind": "arrays", "transitions": len(self.indices),
                              "rewards": rewarded, "weight": 1.0}]}
-
-
-class MixtureSampler:
-    """Each batch drawn from several samplers in fixed proportions (e.g. base and target data 50/50)."""
-
-    def __init__(self, parts: Sequence[tuple[Sampler, float]]):
-        if not parts or any(w <= 0 for _, w in parts):
-            raise ConfigError(f"a mixture needs at least one sampler and positive weights; got {[w for _, w in parts]}")
-        total = float(sum(w for _, w in parts))
-        self.parts = [(s, w / total) for s, w in parts]
-
-    def counts(self, batch_size: int) -> list[int]:
-        """Samples per part: the weights' shares of the batch, rounded by largest remainder."""
-        exact = [w * batch_size for _, w in self.parts]
-        out = [int(x) for x in exact]
-        for k in sorted(range(len(exact)), key=lambda k: out[k] - exact[k])[: batch_size - sum(out)]:
-            out[k] += 1
-        return out
-
-    def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
-        pieces = [s.sample(n, rng) for (s, _), n in zip(self.parts, self.counts(batch_size)) if n > 0]
-        names = {frozenset(p) for p in pieces}
-        if len(names) != 1:
-            raise ConfigError("the mixed samplers return different batch keys (one-step and n-step?); "
-                              "build them alike")
-        return {k: np.concatenate([p[k] for p in pieces]) for k in pieces[0]}
-
-    def describe(self) -> dict[str, Any]:
-        sources = []
-        for s, w in self.parts:
-            for src in s.describe().get("sources", []):
-                sources.append({**src, "weight": src.get("weight", 1.0) * w})
-        return {"sources": sources}

@@ -7,6 +7,14 @@ repository root: ``nsl.collectors``, ``nsl.datasets``, ``nsl.learners``,
 root) this file appends the repository root to ``__path__`` so the same names
 resolve to the root folders.
 
+The modules directly in ``nsl/`` are the small shared core the folders may
+import: ``errors`` (the exception family), ``keys`` (batch keys and
+dimensions), ``workspace`` (paths and atomic writes), ``version``,
+``refs`` (names and dataset references), ``stats`` (the Wilson interval) and
+``checkpoint_format`` (the checkpoint folder format).  The command line
+(``cli``, ``commands/``, ``bench/``) wires the folders together; the core
+imports neither the folders nor the CLI (``tests/test_import_graph.py``).
+
 ``datasets/`` deliberately has no ``__init__.py``: a regular package named
 ``datasets`` at the repository root would shadow Hugging Face's ``datasets``
 (and so break lerobot) whenever the root is on ``sys.path``.
@@ -16,30 +24,10 @@ from __future__ import annotations
 
 import os as _os
 
-__version__ = "0.1.0"
+from nsl.version import __version__, code_version  # noqa: F401  (re-exported)
 
 _root = _os.path.dirname(_os.path.dirname(_os.path.abspath(__file__)))
 if _os.path.isfile(_os.path.join(_root, "pyproject.toml")) and _os.path.isdir(
     _os.path.join(_root, "collectors")
 ):
     __path__.append(_root)  # type: ignore[name-defined]  # noqa: F821
-
-
-def code_version() -> str:
-    """The package version plus the git commit when run from a checkout."""
-    import subprocess
-
-    try:
-        out = subprocess.run(
-            ["git", "-C", _root, "rev-parse", "--short=12", "HEAD"],
-            capture_output=True, text=True, timeout=5,
-        )
-        if out.returncode == 0:
-            dirty = subprocess.run(
-                ["git", "-C", _root, "status", "--porcelain", "--untracked-files=no"],
-                capture_output=True, text=True, timeout=5,
-            ).stdout.strip()
-            return f"{__version__}+g{out.stdout.strip()}{'.dirty' if dirty else ''}"
-    except (OSError, subprocess.SubprocessError):
-        pass
-    return __version__

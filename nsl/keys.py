@@ -5,8 +5,8 @@ Learner and loader code uses these names, never string literals.
 """
 
 OBS_IMAGE = "observation.image"  # (H, W, 3) uint8 camera frame
-OBS_STATE = "observation.state"  # (6,) float32: see STATE_NAMES
-ACTION = "action"  # (6,) float32: dx, dy, dz, dyaw, close, terminate in [-1, 1]
+OBS_STATE = "observation.state"  # (STATE_DIM,) float32: see STATE_NAMES
+ACTION = "action"  # (ACTION_DIM,) float32: dx, dy, dz, dyaw, close, terminate in [-1, 1]
 REWARD = "next.reward"  # float32: 1 on the step that lifts an object
 DONE = "next.done"  # bool: the episode terminated (not a time-limit truncation)
 SUCCESS = "next.success"  # bool: the episode's grasp succeeded (on its last frame)
@@ -25,4 +25,6 @@ DISCOUNT = "next.discount"  # float32: gamma^k for a k-step transition (present 
 
 STATE_NAMES = ["gripper_opening", "wrist_height", "wrist_x", "wrist_y", "wrist_sin_yaw", "wrist_cos_yaw"]
 ACTION_NAMES = ["dx", "dy", "dz", "dyaw", "close", "terminate"]
+STATE_DIM = len(STATE_NAMES)  # length of OBS_STATE
+ACTION_DIM = len(ACTION_NAMES)  # length of ACTION
 FPS = 10  # nominal control rate recorded in dataset metadata (one frame per control step)

@@ -1,10 +1,12 @@
-"""Where nsl keeps its files: datasets, checkpoints, the catalog and runs.
+"""Where nsl keeps its files: datasets, checkpoints, the catalog and runs; atomic file writes.
 
-The workspace root is ``$NSL_HOME`` if set, otherwise ``~/.nsl``.
+The workspace root is ``$NSL_HOME`` if set, otherwise ``~/.nsl``.  The base
+checkpoint shipped with the package lives outside it (:func:`shipped_base_dir`).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import tempfile
@@ -36,6 +38,20 @@ def catalog_path() -> Path:
 
 def cache_dir() -> Path:
     return home() / "cache"
+
+
+def shipped_base_dir() -> Path:
+    """The base checkpoint that ships with nsl (``ckpt:base`` in a workspace that has no checkpoint of that name)."""
+    return Path(__file__).resolve().parent / "assets" / "base"
+
+
+def file_sha256(path: Path) -> str:
+    """The sha256 hex digest of a file, read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while block := f.read(1 << 20):
+            h.update(block)
+    return h.hexdigest()
 
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:

@@ -87,7 +87,9 @@ def _pct(x: float) -> str:
 
 
 def _uses(entry) -> str:
-    return ", ".join(f"{u.dataset}@v{u.version}{':' + u.tier if u.tier else ''} x{u.weight:g}" for u in entry.data)
+    from nsl.catalog import DataUse
+
+    return DataUse.mix(entry.data)
 
 
 def _ckpt_rows(cat, entries) -> list[list[str]]:

@@ -51,7 +51,7 @@ class CollectConfig:
 def on_version_created(version) -> None:
     """Record a newly published dataset version (a ``DatasetVersion``) in the catalog."""
     from nsl.catalog import Catalog
-    from nsl.resolve import register_dataset
+    from nsl.commands._refs import register_dataset
 
     with Catalog() as cat:
         register_dataset(cat, version)
@@ -87,7 +87,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from nsl.collectors import EnvConfig, collect_episodes
     from nsl.datasets import api
-    from nsl.resolve import policy_factory
+    from nsl.commands._refs import policy_factory
 
     cfg = CollectConfig(shift=args.shift, episodes=args.episodes, policy=args.policy, dataset=args.dataset,
                         workers=args.workers, seed=args.seed, batch=args.batch, split=args.split,

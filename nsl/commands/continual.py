@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from nsl.datasets import api
     from nsl.errors import ConfigError
     from nsl.eval import PerformanceMatrix, continual_metrics
-    from nsl.resolve import resolve_init
+    from nsl.commands._refs import resolve_init
 
     # Validate everything before any work starts.
     names = [s.strip() for s in args.sequence.split(",") if s.strip()]
@@ -153,7 +153,7 @@ def _evaluate(policy: str, tasks, cfg: ContinualConfig) -> dict:
     from nsl.catalog import Catalog
     from nsl.collectors import EnvConfig, parse_shift
     from nsl.eval import EvalConfig, evaluate
-    from nsl.resolve import policy_factory, resolve_init
+    from nsl.commands._refs import policy_factory, resolve_init
 
     config = EvalConfig(episodes=cfg.eval_episodes, workers=cfg.workers)
     results = evaluate(policy_factory(policy, EnvConfig()), [parse_shift(t) for t in tasks], config)

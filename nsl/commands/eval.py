@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     from nsl.collectors import EnvConfig, parse_shift_list
     from nsl.errors import ConfigError
     from nsl.eval import EvalConfig, compare_paired, evaluate_outcomes, markdown_table, success_rate_from_outcomes
-    from nsl.resolve import policy_factory
+    from nsl.commands._refs import policy_factory
 
     if args.episodes < 1:
         raise ConfigError(f"--episodes {args.episodes} must be at least 1")
@@ -81,7 +81,7 @@ def _store(table, config) -> None:
         return
     from nsl import code_version
     from nsl.catalog import Catalog
-    from nsl.resolve import resolve_init
+    from nsl.commands._refs import resolve_init
 
     with Catalog() as cat:
         for ref in refs:

@@ -134,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
     from nsl.datasets import api
     from nsl.errors import ConfigError
     from nsl.learners import TrainConfig, train
-    from nsl.resolve import dataset_uses, resolve_init
+    from nsl.commands._refs import dataset_uses, resolve_init
 
     if args.steps < 1:
         raise ConfigError(f"--steps {args.steps} must be at least 1")

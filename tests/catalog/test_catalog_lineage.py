@@ -59,7 +59,7 @@ def test_lineage_across_three_step_fine_tuning_chain(cat, chain):
     assert [c.id for c in lineage] == [clear.id, harsh.id, base.id]
     assert [c.shift for c in lineage] == ["transparent_objects", "harsh_lighting", "base"]
     assert [(u.dataset, u.version, u.tier, u.weight) for u in lineage[0].data] == [
-        ("grasp-base", 1, None, 0.5), ("clear", 2, "400", 0.5)]
+        ("grasp-base", 1, None, 0.5), ("clear", 2, 400, 0.5)]
     assert lineage[1].data[1].hash == chain["data"][1].hash
     text = format_lineage(cat, "ckpt:harsh-clear")
     lines = text.splitlines()

@@ -124,3 +124,16 @@ def test_spatial_network_scores_candidates_as_its_forward_pass_does():
     assert torch.allclose(batched, one_by_one, atol=1e-5)
     with pytest.raises(ConfigError, match="spatial"):
         NetConfig(pool="spatial", columns=2)
+
+
+def test_reinit_head_redraws_exactly_the_head_parameters_of_the_last_column():
+    from nsl.learners.networks import grow_column, reinit_head
+
+    net = grow_column(QNetwork(TINY_NET), copy_last=True)  # two columns, with laterals into the head
+    before = {k: v.clone() for k, v in net.state_dict().items()}
+    reinit_head(net)
+    changed = {k for k, v in net.state_dict().items() if not torch.equal(before[k], v)}
+    last = f"columns.{net.cfg.columns - 1}."
+    expected = {k for k in before if k.startswith(last) and is_head_parameter(k)}
+    assert changed == expected and any(".lateral." in k for k in changed)
+    assert not any(k.startswith("columns.0.") for k in changed)

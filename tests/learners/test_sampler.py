@@ -1,4 +1,4 @@
-"""In-memory samplers: transitions from arrays and episodes, and weighted mixtures."""
+"""The in-memory sampler: transitions from arrays and episodes (mixing by weight is the dataset loader's)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from learner_factories import random_transitions
 
 from nsl import keys
 from nsl.errors import ConfigError
-from nsl.learners import ArraySampler, MixtureSampler
+from nsl.learners import ArraySampler
 
 
 def _episode(t, value, terminated=True):
@@ -40,35 +40,6 @@ def test_sampling_depends_only_on_the_rng():
     a, b = s.sample(8, np.random.default_rng(3)), s.sample(8, np.random.default_rng(3))
     assert all(np.array_equal(a[k], b[k]) for k in a)
     assert a[keys.OBS_IMAGE].shape == (8, 16, 16, 3) and a[keys.DONE].dtype == np.float32
-
-
-def test_mixture_draws_fixed_shares_and_describes_weights():
-    base = ArraySampler.from_episodes([_episode(2, 2)], name="base")
-    target = ArraySampler.from_episodes([_episode(2, 4)], name="target")
-    mix = MixtureSampler([(base, 1.0), (target, 1.0)])
-    batch = mix.sample(10, np.random.default_rng(0))
-    assert (batch[keys.OBS_IMAGE][:, 0, 0, 0] == 2).sum() == 5
-    assert MixtureSampler([(base, 3), (target, 1)]).counts(10) in ([8, 2], [7, 3])
-    assert [(s["name"], s["weight"]) for s in mix.describe()["sources"]] == [("base", 0.5), ("target", 0.5)]
-    with pytest.raises(ConfigError, match="positive weights"):
-        MixtureSampler([(base, 0.0)])
-
-
-class _Discounted(ArraySampler):
-    """An n-step-style sampler: its batches also carry a per-transition discount."""
-
-    def sample(self, batch_size, rng):
-        return {**super().sample(batch_size, rng), keys.DISCOUNT: np.full(batch_size, 0.81, np.float32)}
-
-
-def test_mixture_keeps_extra_keys_and_refuses_mixing_one_step_with_n_step():
-    a = _Discounted.from_episodes([_episode(3, 2)], name="a")
-    b = _Discounted.from_episodes([_episode(3, 4)], name="b")
-    batch = MixtureSampler([(a, 1.0), (b, 1.0)]).sample(8, np.random.default_rng(0))
-    np.testing.assert_array_equal(batch[keys.DISCOUNT], np.full(8, 0.81, np.float32))
-    plain = ArraySampler.from_episodes([_episode(3, 4)], name="plain")
-    with pytest.raises(ConfigError, match="different batch keys"):
-        MixtureSampler([(a, 1.0), (plain, 1.0)]).sample(8, np.random.default_rng(0))
 
 
 def test_inconsistent_arrays_are_refused():

@@ -1,4 +1,4 @@
-"""``python -m nsl.doctor``: check that this machine can run nsl (run by ``make install``)."""
+"""``python -m nsl.commands._doctor``: check that this machine can run nsl (run by ``make install``)."""
 
 from __future__ import annotations
 

@@ -46,8 +46,7 @@ def dataset_uses(cat, mix: list[tuple[str, float]]) -> list:
         view = api.open_view(ref)
         v = view.version
         register_dataset(cat, v)
-        tier = ref.partition(":")[2] or None
-        uses.append(DataUse(v.name, v.version, weight=weight, tier=tier, hash=v.hash))
+        uses.append(DataUse(v.name, v.version, weight=weight, tier=api.parse_ref(ref).tier, hash=v.hash))
     return uses
 
 
@@ -60,29 +59,5 @@ def register_dataset(cat, version) -> None:
 
 
 def resolve_init(cat, ref: str):
-    """A parent checkpoint from the catalog; ``base`` falls back to the checkpoint shipped with nsl."""
-    from nsl.errors import UnknownReferenceError
-
-    try:
-        return cat.resolve_checkpoint(ref)
-    except UnknownReferenceError:
-        if ref.removeprefix("ckpt:") != "base":
-            raise
-        return register_shipped_base(cat)
-
-
-def register_shipped_base(cat):
-    """Register the base checkpoint that ships in ``nsl/assets/base`` (once) and return it."""
-    import json
-    from pathlib import Path
-
-    from nsl.errors import UnknownReferenceError
-
-    folder = Path(__file__).parent / "assets" / "base"
-    if not (folder / "model.safetensors").is_file():
-        raise UnknownReferenceError("checkpoint 'base' is not in the catalog and no shipped base checkpoint exists; "
-                                    "train one with `nsl train ... --name base`")
-    config = json.loads((folder / "config.json").read_text())
-    entry = cat.save_checkpoint("base", int(config.get("step", 0)), folder / "model.safetensors", config,
-                                shift="base", card_info={"note": "shipped with nsl"})
-    return entry  # registered under the name "base", so ckpt:base resolves to it from now on
+    """A parent checkpoint from the catalog (``ckpt:base`` falls back to the one shipped with nsl)."""
+    return cat.resolve_checkpoint(ref)

@@ -1,0 +1,119 @@
+"""The layout rules, read from every module's imports with ``ast``.
+
+* The five folders import only the shared core (``nsl/*.py`` but the CLI) and
+  themselves; ``eval/`` may also import ``collectors/``.
+* The core imports none of the folders and nothing of the CLI.
+* Every third-party package the code imports is declared in pyproject.toml.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+import sys
+import tomllib
+from importlib.metadata import packages_distributions
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+FOLDERS = ("collectors", "datasets", "learners", "eval", "catalog")
+ALLOWED_FOLDERS = {"eval": {"collectors"}}
+CLI = ("nsl.cli", "nsl.__main__", "nsl.commands", "nsl.bench")
+CORE = sorted(f"nsl.{p.stem}" for p in (ROOT / "nsl").glob("*.py")
+              if p.stem not in ("__init__", "__main__", "cli"))
+
+
+def _modules(folder: Path, package: str) -> list[tuple[str, Path]]:
+    out = []
+    for path in sorted(folder.rglob("*.py")):
+        rel = path.relative_to(folder).with_suffix("")
+        parts = [p for p in rel.parts if p != "__init__"]
+        out.append((".".join([package, *parts]), path))
+    return out
+
+
+def _imports(module: str, path: Path) -> list[str]:
+    """Absolute names of everything ``module`` imports (at any depth: lazy imports count)."""
+    is_package = path.name == "__init__.py"
+    names = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            names += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = module.split(".")[: len(module.split(".")) - node.level + (1 if is_package else 0)]
+                parent = ".".join(base + ([node.module] if node.module else []))
+            else:
+                parent = node.module or ""
+            names.append(parent)
+            names += [f"{parent}.{a.name}" for a in node.names]  # `from nsl import workspace` names a module
+    return names
+
+
+def _nsl_targets(names: list[str]) -> set[str]:
+    """The nsl modules or folders named: nsl.X for the core, nsl.FOLDER for a folder, nsl.commands for the CLI."""
+    out = set()
+    for name in names:
+        parts = name.split(".")
+        if parts[0] != "nsl" or len(parts) == 1:
+            continue
+        out.add(".".join(parts[:2]))
+    return out
+
+
+FOLDER_MODULES = [(f, m, p) for f in FOLDERS for m, p in _modules(ROOT / f, f"nsl.{f}")]
+CORE_MODULES = [("nsl", ROOT / "nsl" / "__init__.py")] + [(m, ROOT / "nsl" / f"{m.split('.')[1]}.py") for m in CORE]
+
+
+def _core_names() -> set[str]:
+    """What ``from nsl import X`` may name: the core modules and the package's own attributes."""
+    return set(CORE) | {"nsl.__version__", "nsl.code_version"}
+
+
+@pytest.mark.parametrize("folder, module, path", FOLDER_MODULES, ids=[m for _, m, _ in FOLDER_MODULES])
+def test_folders_import_only_the_core(folder, module, path):
+    allowed = _core_names() | {f"nsl.{folder}"} | {f"nsl.{f}" for f in ALLOWED_FOLDERS.get(folder, ())}
+    bad = sorted(t for t in _nsl_targets(_imports(module, path)) if t not in allowed)
+    assert not bad, f"{path.relative_to(ROOT)} imports {bad}; a folder may import only {sorted(allowed)}"
+
+
+@pytest.mark.parametrize("module, path", CORE_MODULES, ids=[m for m, _ in CORE_MODULES])
+def test_the_core_imports_no_folder_and_no_cli(module, path):
+    targets = _nsl_targets(_imports(module, path))
+    bad = sorted(t for t in targets if t in {f"nsl.{f}" for f in FOLDERS} or t.startswith(CLI))
+    assert not bad, f"{path.relative_to(ROOT)} imports {bad}; the core must stand alone"
+    assert path.is_file()
+
+
+def test_the_core_is_what_the_layout_says():
+    assert {"nsl.errors", "nsl.keys", "nsl.workspace", "nsl.version"} <= set(CORE)
+    assert "nsl.resolve" not in CORE and "nsl.doctor" not in CORE  # CLI glue lives under nsl.commands
+
+
+def test_the_checker_sees_relative_and_lazy_imports(tmp_path):
+    sample = tmp_path / "mod.py"
+    sample.write_text("from ..learners import train\n\ndef f():\n    from nsl import catalog\n")
+    assert _nsl_targets(_imports("nsl.eval.mod", sample)) == {"nsl.learners", "nsl.catalog"}
+
+
+def _normal(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def test_every_imported_package_is_declared():
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    specs = list(project["dependencies"]) + [d for ds in project.get("optional-dependencies", {}).values() for d in ds]
+    declared = {_normal(re.split(r"[<>=!~;\[ ]", d, maxsplit=1)[0]) for d in specs}
+    dists = packages_distributions()
+    missing = {}
+    for folder in ("nsl", *FOLDERS, "scripts"):
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            for name in _imports("x.y", path):
+                top = name.split(".")[0]
+                if not top or top in sys.stdlib_module_names or top in ("nsl", "x", "__future__"):
+                    continue
+                if not any(_normal(d) in declared for d in dists.get(top, [top])):
+                    missing.setdefault(top, str(path.relative_to(ROOT)))
+    assert not missing, f"imported but not declared in pyproject.toml: {missing}"
