@@ -145,11 +145,17 @@ class _Handles:
 class GraspEnv(gym.Env):
     """Bin grasping with a parallel-jaw gripper, rendered by MuJoCo."""
 
-    metadata = {"render_modes": ["rgb_array"]}
+    # One control step is `substeps` physics steps of 2 ms (50 ms at the default 25): 20 frames per second.
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
 
-    def __init__(self, config: EnvConfig | None = None, renderer: SceneRenderer | None = None, **overrides: Any):
+    def __init__(self, config: EnvConfig | None = None, renderer: SceneRenderer | None = None,
+                 render_mode: str | None = None, **overrides: Any):
         if config is not None and overrides:
             raise ConfigError("pass either an EnvConfig or keyword overrides, not both")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ConfigError(f"render_mode {render_mode!r} is not supported; use one of "
+                              f"{self.metadata['render_modes']} (or None)")
+        self.render_mode = render_mode  # render() returns the camera frame in either case
         self.config = config = EnvConfig(**overrides) if config is None else config
         self.shift = config.shift_spec
         n = config.image_size
