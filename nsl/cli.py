@@ -43,8 +43,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from nsl.commands._options import rename_old_options
+
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(rename_old_options(sys.argv[1:] if argv is None else list(argv)))
     if not getattr(args, "func", None):
         parser.print_help()
         return 1

@@ -8,7 +8,7 @@ One name per idea across all commands (``tests/test_cli_options.py`` checks it):
 * ``--workers``: worker processes; ``--seed``: the seed; ``--json``: one JSON document on stdout, nothing else.
 
 Help texts show their defaults through :class:`HelpFormatter`.  Options that
-were renamed keep their old spelling as a hidden alias that warns once.
+were renamed keep working under their old spelling (:data:`RENAMED`), with a note.
 """
 
 from __future__ import annotations
@@ -34,23 +34,20 @@ def add_parser(sub: argparse._SubParsersAction, name: str, **kwargs) -> argparse
     return sub.add_parser(name, formatter_class=HelpFormatter, **kwargs)
 
 
-class _Renamed(argparse.Action):
-    """An old option spelling: stores into the new option's destination and says the new name on stderr."""
-
-    def __init__(self, option_strings, dest, new: str = "", **kwargs):
-        self.new = new
-        super().__init__(option_strings, dest, **kwargs)
-
-    def __call__(self, parser, namespace, values, option_string=None):
-        print(f"nsl: {option_string} is now {self.new}; the old name will go away", file=sys.stderr)
-        setattr(namespace, self.dest, values)
+# Old spellings still accepted (nsl.cli.main rewrites them and says the new name on stderr).
+RENAMED = {"--dataset": "--data", "--batch": "--batch-size"}
 
 
-def renamed(p: argparse.ArgumentParser, old: str, new: str, **kwargs) -> None:
-    """Accept ``old`` as a hidden alias of the already added option ``new``."""
-    action = next(a for a in p._actions if new in a.option_strings)
-    p.add_argument(old, action=_Renamed, new=new, dest=action.dest, type=action.type, default=argparse.SUPPRESS,
-                   help=argparse.SUPPRESS, **kwargs)
+def rename_old_options(argv: list[str]) -> list[str]:
+    """``argv`` with retired option spellings replaced by the current ones (a note for each on stderr)."""
+    out = []
+    for arg in argv:
+        name, eq, value = arg.partition("=")
+        if name in RENAMED:
+            print(f"nsl: {name} is now {RENAMED[name]}; the old name will go away", file=sys.stderr)
+            arg = RENAMED[name] + eq + value
+        out.append(arg)
+    return out
 
 
 def add_json(p: argparse.ArgumentParser, what: str = "the result") -> None:
@@ -68,4 +65,3 @@ def add_seed(p, default: int = 0, help: str = "seed") -> None:
 def add_env_batch_size(p, default: int) -> None:
     p.add_argument("--batch-size", type=int, default=default,
                    help="environments per worker stepping in lock-step; the policy acts on them as one batch")
-    renamed(p, "--batch", "--batch-size")

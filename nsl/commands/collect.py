@@ -15,7 +15,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 
-from nsl.commands._options import add_env_batch_size, add_parser, add_seed, add_workers, renamed
+from nsl.commands._options import add_env_batch_size, add_parser, add_seed, add_workers
 from nsl.errors import ConfigError
 
 
@@ -71,7 +71,6 @@ def register(sub: argparse._SubParsersAction) -> None:
                                                   "or a checkpoint, ckpt:NAME[@STEP] (its CEM policy; see --epsilon)")
     p.add_argument("--data", required=True, metavar="NAME",
                    help="name of the dataset to write (an existing name resumes or appends)")
-    renamed(p, "--dataset", "--data")
     add_workers(p, help="simulator processes (the data does not depend on it)")
     add_seed(p, help="collection seed: episode i is a pure function of (seed, i)")
     p.add_argument("--epsilon", type=float, default=0.0,

@@ -204,8 +204,13 @@ def train(*, data: list[str], steps: int, name: str, init: str | None = None, me
     if monitor is not None:
         _register_evaluated(cat, name, run_dir, parent, uses, target_shift)
         best_step = monitor.stopper.best_step
-        print(f"best by {criterion}: ckpt:{name}@{best_step}; curve in {run_dir / 'curve.csv'}; "
-              f"plot it with `nsl report {run_dir}`")
+        if best_step is None:
+            best = "no step (every evaluation failed)"
+        elif (run_dir / "checkpoints" / f"step-{best_step:09d}").is_dir():
+            best = f"ckpt:{name}@{best_step}"
+        else:  # step 0 is the starting point, which has no folder of its own
+            best = f"step {best_step}, the starting point" + (f" ({parent.ref})" if parent else " (untrained)")
+        print(f"best by {criterion}: {best}; curve in {run_dir / 'curve.csv'}; plot it with `nsl report {run_dir}`")
     return entry
 
 
