@@ -172,7 +172,7 @@ def train(*, data: list[str], steps: int, name: str, init: str | None = None, me
     for view in views:
         _check_env_version(view)
     target_view = views[-1]
-    target_shift = target_shift or _view_shift(target_view)
+    target_shift = target_shift or view_shift(target_view)
 
     sources = [(ref, w) for ref, w in mix]
     held_out = None
@@ -232,7 +232,7 @@ def _check_env_version(view) -> None:
                 f"{ENV_VERSION} (wrist camera, 7 cm jaw); collect it again, or set NSL_HOME to a new workspace")
 
 
-def _view_shift(view) -> str:
+def view_shift(view) -> str:
     spec = view.version.provenance["collections"][-1]["spec"]
     return spec.get("env", {}).get("shift", "base")
 

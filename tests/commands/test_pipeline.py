@@ -191,3 +191,31 @@ def test_td_criterion_chooses_a_step_by_held_out_td_error(pipeline, capsys):
         assert f"best by td: ckpt:td-tiny@{summary['best_step']}" in out
         with Catalog() as cat:
             assert cat.resolve_checkpoint(f"ckpt:td-tiny@{summary['best_step']}").step == summary["best_step"]
+
+
+def test_efficiency_writes_tiers_json_that_the_report_reads(pipeline, capsys):
+    from nsl.eval import TierResults
+
+    args = ["efficiency", "--data", "grasp-harsh", "--sizes", "4,8,100", "--init", "ckpt:base-tiny",
+            "--base-data", "grasp-base", "--steps", "2", "--eval-episodes", "3", "--name", "eff"]
+    assert run_cli(*args) == 0
+    run_dir = workspace.runs_dir() / "eff"
+    tiers = TierResults.load(run_dir / "tiers.json")
+    assert list(tiers.rows) == ["harsh_lighting"] and tiers.tiers == [4, 8]  # 100 > the dataset's 12 episodes
+    row = tiers.rows["harsh_lighting"]
+    assert row.base.episodes == 3 and {k: r.episodes for k, r in row.tiers.items()} == {4: 3, 8: 3}
+    with Catalog() as cat:  # each cell is a catalogued fine-tune of the starting checkpoint on its tier
+        ckpt = cat.resolve_checkpoint("ckpt:eff-harsh-lighting-4@latest")
+        assert ckpt.parent == cat.resolve_checkpoint("ckpt:base-tiny@latest").id
+        assert [(d.dataset, d.tier) for d in ckpt.data] == [("grasp-base", None), ("grasp-harsh", "4")]
+        assert {e.shift for e in cat.evaluations(ckpt.id)} == {"harsh_lighting"}
+    capsys.readouterr()
+    assert run_cli(*args) == 0  # everything measured: nothing is trained or evaluated again
+    out = capsys.readouterr().out
+    assert "tier 4 done earlier" in out and "tier 8 done earlier" in out
+    assert TierResults.load(run_dir / "tiers.json") == tiers
+    assert run_cli("report", "eff") == 0
+    report = (run_dir / "report" / "report.md").read_text()
+    assert "| challenge | base | 4 | 8 | best (change) |" in report
+    with pytest.raises(ConfigError, match="different configuration"):
+        run_cli("--debug", *args[:-2], "--name", "eff", "--steps", "3")
