@@ -44,7 +44,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sizes", default="25,50,100,200,400,800",
                    help="comma-separated tier sizes (target episodes); sizes above a dataset's size are skipped")
     p.add_argument("--init", default="ckpt:base", help="checkpoint every fine-tune starts from")
-    p.add_argument("--base-data", default="grasp-base", metavar="REF", help="base dataset mixed 50/50 into each fine-tune")
+    p.add_argument("--base-data", default="grasp-base", metavar="REF",
+                   help="base dataset mixed 50/50 into each fine-tune")
     p.add_argument("--name", default="efficiency", help="run name (folder under $NSL_HOME/runs, checkpoint prefix)")
     p.add_argument("--steps", type=int, default=4000, help="gradient steps per fine-tune")
     p.add_argument("--eval-episodes", type=int, default=100, help="evaluation episodes per cell")
@@ -93,7 +94,8 @@ def efficiency(*, data: list[str], sizes: tuple[int, ...], init: str = "ckpt:bas
     for ref in data:
         view = api.open_view(ref)
         if view.num_episodes != view.version.num_episodes:
-            raise ConfigError(f"--data {ref!r} is a tier; give the whole dataset (NAME or NAME@vN), --sizes sets the tiers")
+            raise ConfigError(f"--data {ref!r} is a tier; give the whole dataset (NAME or NAME@vN); "
+                              "--sizes sets the tiers")
         fits = tuple(sorted({k for k in sizes if k <= view.num_episodes}))
         if not fits:
             raise ConfigError(f"--data {ref!r} holds {view.num_episodes} episodes, fewer than every size in --sizes")
