@@ -219,3 +219,20 @@ def test_efficiency_writes_tiers_json_that_the_report_reads(pipeline, capsys):
     assert "| challenge | base | 4 | 8 | best (change) |" in report
     with pytest.raises(ConfigError, match="different configuration"):
         run_cli("--debug", *args[:-2], "--name", "eff", "--steps", "3")
+
+
+def test_continual_reports_a_stage_error_once_and_debug_shows_it(pipeline, monkeypatch, capsys):
+    import nsl.commands.collect as collect_command
+
+    def failing_collect(**kwargs):
+        raise ConfigError(f"collection of {kwargs['data']} refused")
+
+    monkeypatch.setattr(collect_command, "collect", failing_collect)
+    args = ["continual", "--sequence", "harsh_lighting", "--init", "ckpt:base-tiny", "--base-data", "grasp-base",
+            "--episodes", "4", "--steps", "2", "--eval-episodes", "2", "--name", "cont-error"]
+    assert run_cli(*args) == 2
+    err = capsys.readouterr().err
+    assert [line for line in err.splitlines() if line.startswith("nsl: error:")] == [
+        "nsl: error: collection of cont-error-harsh-lighting refused"]
+    with pytest.raises(ConfigError, match="collection of cont-error-harsh-lighting refused"):
+        run_cli("--debug", *args)  # the stage's own exception, with its traceback
