@@ -42,6 +42,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from nsl import keys
 from nsl.errors import ConfigError
 
 from .render import SceneRenderer  # sets MUJOCO_GL before mujoco is imported
@@ -145,8 +146,8 @@ class _Handles:
 class GraspEnv(gym.Env):
     """Bin grasping with a parallel-jaw gripper, rendered by MuJoCo."""
 
-    # One control step is `substeps` physics steps of 2 ms (50 ms at the default 25): 20 frames per second.
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+    # One frame per control step, at the nominal control rate that datasets record (nsl.keys.FPS).
+    metadata = {"render_modes": ["rgb_array"], "render_fps": keys.FPS}
 
     def __init__(self, config: EnvConfig | None = None, renderer: SceneRenderer | None = None,
                  render_mode: str | None = None, **overrides: Any):
