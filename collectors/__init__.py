@@ -13,7 +13,9 @@ reach into the modules)::
 The names are loaded on first use (a module-level ``__getattr__``), so
 ``import nsl.collectors`` does not import MuJoCo.  Importing it registers the
 task with Gymnasium as ``nsl/Grasp-v3`` through a string entry point; MuJoCo
-is imported when ``gymnasium.make`` builds the environment.
+is imported when ``gymnasium.make`` builds the environment.  (Gymnasium 1.x
+has no plugin entry points; without an import, write
+``gymnasium.make("nsl.collectors:nsl/Grasp-v3", ...)``, which imports it.)
 """
 
 from __future__ import annotations
