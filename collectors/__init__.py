@@ -8,17 +8,56 @@ reach into the modules)::
     Policy, scripted_policy                     # random, oracle[:NOISE]
     Episode, episode_seeds, run_episodes, make_envs, collect_episodes
     render_gallery                              # `nsl render`
+    GYM_ID                                      # gymnasium.make(GYM_ID, shift="harsh_lighting")
+
+The names are loaded on first use (a module-level ``__getattr__``), so
+``import nsl.collectors`` does not import MuJoCo.  Importing it registers the
+task with Gymnasium as ``nsl/Grasp-v3`` through a string entry point; MuJoCo
+is imported when ``gymnasium.make`` builds the environment.  (Gymnasium 1.x
+has no plugin entry points; without an import, write
+``gymnasium.make("nsl.collectors:nsl/Grasp-v3", ...)``, which imports it.)
 """
 
-from .env import ACTION_DIM, CONTROL_MODES, ENV_VERSION, STATE_DIM, EnvConfig, GraspEnv
-from .gallery import render_gallery
-from .parallel import collect_episodes
-from .policies import Policy, scripted_policy
-from .rollout import Episode, episode_seeds, make_envs, run_episodes
-from .shifts import SHIFT_NAMES, SHIFTS, ShiftSpec, parse_shift, parse_shift_list
+from __future__ import annotations
 
-__all__ = [
-    "ACTION_DIM", "CONTROL_MODES", "ENV_VERSION", "STATE_DIM", "EnvConfig", "GraspEnv", "render_gallery",
-    "collect_episodes", "Policy", "scripted_policy", "Episode", "episode_seeds", "make_envs", "run_episodes",
-    "SHIFT_NAMES", "SHIFTS", "ShiftSpec", "parse_shift", "parse_shift_list",
-]
+import importlib
+
+GYM_ID = "nsl/Grasp-v3"  # the version matches ENV_VERSION ("nsl-grasp-v3"; tests/collectors/test_gym.py checks it)
+
+_EXPORTS = {
+    "env": ("ACTION_DIM", "CONTROL_MODES", "ENV_VERSION", "STATE_DIM", "EnvConfig", "GraspEnv"),
+    "gallery": ("render_gallery",),
+    "parallel": ("collect_episodes",),
+    "policies": ("Policy", "scripted_policy"),
+    "rollout": ("Episode", "episode_seeds", "make_envs", "run_episodes"),
+    "shifts": ("SHIFT_NAMES", "SHIFTS", "ShiftSpec", "parse_shift", "parse_shift_list"),
+}
+_WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
+
+__all__ = ["GYM_ID", *_WHERE]
+
+
+def __getattr__(name: str):
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value  # later lookups skip __getattr__
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+def _register_gym() -> None:
+    """Make ``gymnasium.make("nsl/Grasp-v3", shift=..., render_mode="rgb_array")`` build a GraspEnv."""
+    try:
+        import gymnasium
+    except ImportError:  # gymnasium is a dependency; without it there is nothing to register with
+        return
+    if GYM_ID not in gymnasium.registry:
+        gymnasium.register(id=GYM_ID, entry_point=f"{__name__}.env:GraspEnv", disable_env_checker=False)
+
+
+_register_gym()

@@ -42,6 +42,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from nsl import keys
 from nsl.errors import ConfigError
 from nsl.keys import ACTION_DIM, STATE_DIM  # noqa: F401  (re-exported by nsl.collectors)
 
@@ -144,11 +145,17 @@ class _Handles:
 class GraspEnv(gym.Env):
     """Bin grasping with a parallel-jaw gripper, rendered by MuJoCo."""
 
-    metadata = {"render_modes": ["rgb_array"]}
+    # One frame per control step, at the nominal control rate that datasets record (nsl.keys.FPS).
+    metadata = {"render_modes": ["rgb_array"], "render_fps": keys.FPS}
 
-    def __init__(self, config: EnvConfig | None = None, renderer: SceneRenderer | None = None, **overrides: Any):
+    def __init__(self, config: EnvConfig | None = None, renderer: SceneRenderer | None = None,
+                 render_mode: str | None = None, **overrides: Any):
         if config is not None and overrides:
             raise ConfigError("pass either an EnvConfig or keyword overrides, not both")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ConfigError(f"render_mode {render_mode!r} is not supported; use one of "
+                              f"{self.metadata['render_modes']} (or None)")
+        self.render_mode = render_mode  # render() returns the camera frame in either case
         self.config = config = EnvConfig(**overrides) if config is None else config
         self.shift = config.shift_spec
         n = config.image_size

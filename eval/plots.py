@@ -149,7 +149,7 @@ def plot_tiers(tiers: TierResults, path: Path, title: str = "Sample efficiency",
             x = np.array([k for k, _ in pts], dtype=float) * 1.04 ** (i - (len(names) - 1) / 2)  # dodge error bars
             y = np.array([100 * v.success_rate for _, v in pts])
             err = np.array([[100 * (v.success_rate - v.ci[0]), 100 * (v.ci[1] - v.success_rate)] if v.ci
-                            else [0.0, 0.0] for _, v in pts]).T
+                            else [0.0, 0.0] for _, v in pts]).T.clip(min=0.0)  # 0% or 100%: rounding below 0
             ax.errorbar(x, y, yerr=err, fmt="o-", color=colour, capsize=3, ms=4, lw=1.5,
                         label=name.replace("_", " "))
         if row.base is not None:

@@ -19,7 +19,7 @@ nsl - never stop learning: offline continual learning for vision-based grasping.
 
 Typical flow:
   nsl render --shift all --out gallery.png        look at the task and its shifts
-  nsl collect --shift base --episodes 2000 --policy oracle:0.5 --dataset grasp-base
+  nsl collect --shift base --episodes 2000 --policy oracle:0.5 --data grasp-base
   nsl train --data grasp-base --steps 20000 --name base
   nsl eval --checkpoint ckpt:base --shift all --episodes 200
 
@@ -43,8 +43,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from nsl.commands._options import rename_old_options
+
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(rename_old_options(sys.argv[1:] if argv is None else list(argv)))
     if not getattr(args, "func", None):
         parser.print_help()
         return 1

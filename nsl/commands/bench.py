@@ -7,10 +7,12 @@ import importlib
 import json
 import pkgutil
 
+from nsl.commands._options import add_json, add_parser
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("bench", help="run a benchmark (env, data, learner, eval) and print its figures",
-                       description="Benchmarks compare nsl against a reference measured in the same invocation.")
+    p = add_parser(sub, "bench", help="run a benchmark (env, data, learner, eval) and print its figures",
+                   description="Benchmarks compare nsl against a reference measured in the same invocation.")
     bsub = p.add_subparsers(dest="bench", metavar="NAME", required=True)
     import nsl.bench as benches
 
@@ -18,8 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         if mod.name.startswith("_"):
             continue
         module = importlib.import_module(f"nsl.bench.{mod.name}")
-        bp = bsub.add_parser(mod.name, help=module.HELP, description=module.HELP)
-        bp.add_argument("--json", action="store_true", help="print one JSON object")
+        bp = add_parser(bsub, mod.name, help=module.HELP, description=module.HELP)
+        add_json(bp, "the figures")
         bp.add_argument("--quick", action="store_true", help="a short run (under a minute)")
         module.add_arguments(bp)
         bp.set_defaults(func=lambda args, m=module: _run(m, args))

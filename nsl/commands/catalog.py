@@ -6,6 +6,8 @@ import argparse
 import json
 import sys
 
+from nsl.commands._options import add_json, add_parser
+
 EPILOG = """\
 references:
   ckpt:NAME              newest checkpoint of NAME      ckpt:NAME@STEP     saved at gradient step STEP
@@ -16,50 +18,51 @@ references:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("catalog", help="list, inspect and maintain datasets, checkpoints and evaluations",
-                       description="The catalog ($NSL_HOME/catalog.sqlite) records every dataset version, "
-                                   "checkpoint and evaluation, and where each checkpoint came from.",
-                       epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = add_parser(sub, "catalog", help="list, inspect and maintain datasets, checkpoints and evaluations",
+                   description="The catalog ($NSL_HOME/catalog.sqlite) records every dataset version, "
+                               "checkpoint and evaluation, and where each checkpoint came from.",
+                   epilog=EPILOG)
     cs = p.add_subparsers(dest="catalog_command", metavar="ACTION", required=True)
 
-    q = cs.add_parser("ls", help="list entries")
-    q.add_argument("kind", nargs="?", default="all", choices=["all", "checkpoints", "datasets", "evals", "tags"])
+    q = add_parser(cs, "ls", help="list entries")
+    q.add_argument("kind", nargs="?", default="all", choices=["all", "checkpoints", "datasets", "evals", "tags"],
+                   help="what to list (default: all)")
     q.add_argument("--name", help="only entries of this checkpoint or dataset name")
-    q.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    add_json(q, "the entries")
     q.set_defaults(func=run_ls)
 
-    q = cs.add_parser("show", help="everything about one checkpoint or dataset")
+    q = add_parser(cs, "show", help="everything about one checkpoint or dataset")
     q.add_argument("ref", help="ckpt:... or data:... (no prefix: a checkpoint)")
-    q.add_argument("--json", action="store_true")
+    add_json(q, "the entry")
     q.set_defaults(func=run_show)
 
-    q = cs.add_parser("lineage", help="ancestry tree of a checkpoint, with the data each step used")
+    q = add_parser(cs, "lineage", help="ancestry tree of a checkpoint, with the data each step used")
     q.add_argument("ref", help="checkpoint reference, e.g. ckpt:harsh@latest")
     q.add_argument("--descendants", action="store_true", help="show what was fine-tuned from it instead")
     q.add_argument("--no-evals", action="store_true", help="leave evaluation results out")
     q.set_defaults(func=run_lineage)
 
-    q = cs.add_parser("tag", help="point a tag at a checkpoint (ckpt:TAG then resolves to it), or remove one",
+    q = add_parser(cs, "tag", help="point a tag at a checkpoint (ckpt:TAG then resolves to it), or remove one",
                       description="nsl catalog tag ckpt:harsh@best harsh-best  |  nsl catalog tag --delete harsh-best")
     q.add_argument("ref", nargs="?", help="checkpoint reference")
     q.add_argument("tag", nargs="?", help="tag name (moves the tag if it exists)")
     q.add_argument("-d", "--delete", metavar="TAG", help="remove this tag")
     q.set_defaults(func=run_tag)
 
-    q = cs.add_parser("rm", help="remove an entry nothing depends on (and its files in the workspace)")
+    q = add_parser(cs, "rm", help="remove an entry nothing depends on (and its files in the workspace)")
     q.add_argument("ref", help="ckpt:... or data:NAME@vN")
     q.add_argument("--force", action="store_true", help="remove even if other entries depend on it")
     q.add_argument("--keep-files", action="store_true", help="remove the catalog entry only")
     q.set_defaults(func=run_rm)
 
-    q = cs.add_parser("gc", help="delete files no catalog entry references (asks first)")
+    q = add_parser(cs, "gc", help="delete files no catalog entry references (asks first)")
     q.add_argument("--yes", action="store_true", help="do not ask for confirmation")
     q.add_argument("--dry-run", action="store_true", help="only list what would be removed")
     q.add_argument("--min-age", type=float, default=3600.0,
-                   help="leave alone anything modified within this many seconds (default 3600)")
+                   help="leave alone anything modified within this many seconds")
     q.set_defaults(func=run_gc)
 
-    q = cs.add_parser("verify", help="re-hash checkpoint and dataset files; report altered ones")
+    q = add_parser(cs, "verify", help="re-hash checkpoint and dataset files; report altered ones")
     q.add_argument("refs", nargs="*", help="entries to check (default: all)")
     q.set_defaults(func=run_verify)
 

@@ -14,8 +14,8 @@ import shlex
 import sys
 import time
 from dataclasses import asdict, dataclass
-from typing import Any
 
+from nsl.commands._options import add_env_batch_size, add_parser, add_seed, add_workers
 from nsl.errors import ConfigError
 
 
@@ -26,10 +26,10 @@ class CollectConfig:
     shift: str  # shift spec, e.g. "harsh_lighting" or "harsh_lighting+checkerboard_backing@0.5"
     episodes: int  # total episodes the dataset should hold afterwards
     policy: str  # policy reference: random, oracle[:NOISE] or ckpt:NAME[@...] (a checkpoint's CEM policy)
-    dataset: str  # dataset name; an existing name resumes or appends
+    data: str  # dataset name; an existing name resumes or appends
     workers: int = 1  # simulator processes (does not change the data)
     seed: int = 0  # episode i is a pure function of (seed, i)
-    batch: int = 1  # environments per worker stepping in lock-step (a learned policy batches them)
+    batch_size: int = 1  # environments per worker stepping in lock-step (a learned policy batches them)
     split: str = "train"  # object split: train or test objects
     image_size: int = 64  # camera resolution in pixels
     episodes_per_file: int = 100  # episodes per Parquet file (also the resume granularity)
@@ -38,8 +38,8 @@ class CollectConfig:
     def __post_init__(self) -> None:
         if self.episodes < 1:
             raise ConfigError(f"--episodes {self.episodes} must be at least 1")
-        if self.workers < 1 or self.batch < 1:
-            raise ConfigError(f"--workers {self.workers} and --batch {self.batch} must be at least 1")
+        if self.workers < 1 or self.batch_size < 1:
+            raise ConfigError(f"--workers {self.workers} and --batch-size {self.batch_size} must be at least 1")
         if self.episodes_per_file < 1:
             raise ConfigError(f"--episodes-per-file {self.episodes_per_file} must be at least 1")
         if not 0.0 <= self.epsilon <= 1.0:
@@ -58,68 +58,83 @@ def on_version_created(version) -> None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "collect", help="collect grasp episodes into a versioned dataset (resumable, parallel)",
+    p = add_parser(
+        sub, "collect", help="collect grasp episodes into a versioned dataset (resumable, parallel)",
         description="Run a policy for N episodes in a shifted environment and write them as a LeRobot v3.0 "
                     "dataset version under $NSL_HOME/datasets/NAME/. Running the same command again resumes an "
                     "interrupted collection; asking an existing dataset for more episodes appends a new version.",
         epilog="example: nsl collect --shift harsh_lighting --episodes 800 --policy oracle:0.5 "
-               "--dataset grasp-harsh --workers 2")
+               "--data grasp-harsh --workers 2")
     p.add_argument("--shift", required=True, help="shift spec: base, harsh_lighting, checkerboard_backing@0.5, ...")
     p.add_argument("--episodes", type=int, required=True, help="total episodes the dataset should hold")
     p.add_argument("--policy", required=True, help="policy: random, oracle[:NOISE] (noise std, e.g. oracle:0.5), "
                                                   "or a checkpoint, ckpt:NAME[@STEP] (its CEM policy; see --epsilon)")
-    p.add_argument("--dataset", required=True, help="dataset name (an existing name resumes or appends)")
-    p.add_argument("--workers", type=int, default=1, help="simulator processes (default 1; data is identical)")
-    p.add_argument("--seed", type=int, default=0, help="collection seed (default 0)")
+    p.add_argument("--data", required=True, metavar="NAME",
+                   help="name of the dataset to write (an existing name resumes or appends)")
+    add_workers(p, help="simulator processes (the data does not depend on it)")
+    add_seed(p, help="collection seed: episode i is a pure function of (seed, i)")
     p.add_argument("--epsilon", type=float, default=0.0,
-                   help="with a ckpt: policy, chance of a random action per step (exploration; default 0)")
-    p.add_argument("--batch", type=int, default=1, help="environments per worker in lock-step (default 1)")
-    p.add_argument("--split", default="train", choices=["train", "test"], help="object split (default train)")
-    p.add_argument("--image-size", type=int, default=64, help="camera resolution in pixels (default 64)")
+                   help="with a ckpt: policy, chance of a random action per step (exploration)")
+    add_env_batch_size(p, default=1)
+    p.add_argument("--split", default="train", choices=["train", "test"], help="object split")
+    p.add_argument("--image-size", type=int, default=64, help="camera resolution in pixels")
     p.add_argument("--episodes-per-file", type=int, default=100,
-                   help="episodes per Parquet file, also the resume granularity (default 100)")
+                   help="episodes per Parquet file, also the resume granularity")
     p.add_argument("--restart", action="store_true", help="discard an unfinished collection of this dataset")
     p.add_argument("--stop-after-files", type=int, default=0, help=argparse.SUPPRESS)  # tests: simulate a kill
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    collect(shift=args.shift, episodes=args.episodes, policy=args.policy, data=args.data, workers=args.workers,
+            seed=args.seed, batch_size=args.batch_size, split=args.split, image_size=args.image_size,
+            episodes_per_file=args.episodes_per_file, epsilon=args.epsilon, restart=args.restart,
+            stop_after_files=args.stop_after_files)
+    return 0
+
+
+def collect(*, shift: str, episodes: int, policy: str, data: str, workers: int = 1, seed: int = 0,
+            batch_size: int = 1, split: str = "train", image_size: int = 64, episodes_per_file: int = 100,
+            epsilon: float = 0.0, restart: bool = False, stop_after_files: int = 0):
+    """Collect ``episodes`` episodes into dataset ``data`` (resuming or appending); returns its DatasetVersion.
+
+    The keyword arguments are those of ``nsl collect``.  An interruption raises
+    KeyboardInterrupt with the finished files staged, so the same call resumes.
+    """
     from nsl.collectors import EnvConfig, collect_episodes
     from nsl.datasets import api
     from nsl.commands._refs import policy_factory
 
-    cfg = CollectConfig(shift=args.shift, episodes=args.episodes, policy=args.policy, dataset=args.dataset,
-                        workers=args.workers, seed=args.seed, batch=args.batch, split=args.split,
-                        image_size=args.image_size, episodes_per_file=args.episodes_per_file,
-                        epsilon=args.epsilon)
+    cfg = CollectConfig(shift=shift, episodes=episodes, policy=policy, data=data, workers=workers, seed=seed,
+                        batch_size=batch_size, split=split, image_size=image_size,
+                        episodes_per_file=episodes_per_file, epsilon=epsilon)
     env_config = EnvConfig(shift=cfg.shift, split=cfg.split, image_size=cfg.image_size)
     make_policy = policy_factory(cfg.policy, env_config, epsilon=cfg.epsilon)
     spec = {"env": env_config.to_dict(), "policy": make_policy().describe(), "policy_ref": cfg.policy,
             "seed": cfg.seed}
-    coll = api.Collection.begin(cfg.dataset, cfg.episodes, spec, cfg.image_size, cfg.episodes_per_file,
-                                restart=args.restart)
+    coll = api.Collection.begin(cfg.data, cfg.episodes, spec, cfg.image_size, cfg.episodes_per_file,
+                                restart=restart)
     if coll.up_to_date:
         v = coll.parent
         print(f"{v.ref} already holds {v.num_episodes} episodes (asked for {cfg.episodes}); nothing to collect"
               + (f"; use {v.name}:{cfg.episodes} for the first {cfg.episodes}" if cfg.episodes < v.num_episodes
                  else ""))
-        return 0
+        return v
     missing = coll.missing_indices()
     if len(missing) < coll.stop - coll.start:
-        print(f"resuming {cfg.dataset}: {coll.stop - coll.start - len(missing)} of {coll.stop - coll.start} "
+        print(f"resuming {cfg.data}: {coll.stop - coll.start - len(missing)} of {coll.stop - coll.start} "
               "episodes already staged", file=sys.stderr)
     started = time.perf_counter()
-    _collect(coll, cfg, env_config, make_policy, missing, args.stop_after_files, collect_episodes)
+    _collect(coll, cfg, env_config, make_policy, missing, stop_after_files, collect_episodes)
     version = coll.finish(created={
-        "command": "nsl collect " + shlex.join(_argv(cfg)), "workers": cfg.workers, "batch": cfg.batch,
+        "command": "nsl collect " + shlex.join(_argv(cfg)), "workers": cfg.workers, "batch_size": cfg.batch_size,
         "collect_seconds": round(time.perf_counter() - started, 2), "config": asdict(cfg)})
     info = version.describe()
     on_version_created(version)
     print(f"wrote {version.ref}: {version.num_episodes} episodes ({coll.stop - coll.start} new), "
           f"{version.num_frames} frames, success {info['success_rate']:.1%}, {version.hash[:19]}... "
           f"at {version.root}")
-    return 0
+    return version
 
 
 def _collect(coll, cfg: CollectConfig, env_config, make_policy, missing: list[int], stop_after: int,
@@ -129,8 +144,8 @@ def _collect(coll, cfg: CollectConfig, env_config, make_policy, missing: list[in
     if not missing:
         return
     episodes = collect_episodes(env_config, make_policy, missing, seed=cfg.seed, workers=cfg.workers,
-                                batch=cfg.batch)
-    bar = tqdm(total=len(missing), unit="ep", desc=f"collect {cfg.dataset}", dynamic_ncols=True)
+                                batch=cfg.batch_size)
+    bar = tqdm(total=len(missing), unit="ep", desc=f"collect {cfg.data}", dynamic_ncols=True)
     successes = files = 0
     try:
         for k, ep in enumerate(episodes):

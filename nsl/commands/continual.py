@@ -1,7 +1,7 @@
 """``nsl continual``: fine-tune through a sequence of shifts and measure forgetting and transfer.
 
-Each stage runs the real subcommands: ``nsl collect`` with the current policy
-in the stage's shift, then ``nsl train`` fine-tuning the previous stage's
+Each stage calls the functions behind the subcommands: ``collect`` with the
+current policy in the stage's shift, then ``train`` fine-tuning the previous stage's
 checkpoint on that data mixed 50/50 with the base data (the study's Table 5.3
 protocol).  After every stage its checkpoint is evaluated on every task, base
 included, and the performance matrix is saved; an interrupted run resumes at
@@ -13,6 +13,8 @@ from __future__ import annotations
 import argparse
 import json
 from dataclasses import asdict, dataclass
+
+from nsl.commands._options import add_parser, add_seed, add_workers
 
 
 @dataclass(frozen=True)
@@ -32,21 +34,22 @@ class ContinualConfig:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "continual", help="fine-tune through a sequence of shifts; performance matrix, forgetting, transfer",
-        description=__doc__.split("\n\n", 1)[1].strip(), formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p = add_parser(
+        sub, "continual", help="fine-tune through a sequence of shifts; performance matrix, forgetting, transfer",
+        description=__doc__.split("\n\n", 1)[1].strip())
     p.add_argument("--sequence", required=True,
                    help="comma-separated shifts, e.g. harsh_lighting,transparent_objects,checkerboard_backing,"
                         "extend_gripper,offset_gripper")
     p.add_argument("--init", default="ckpt:base", help="starting checkpoint")
-    p.add_argument("--base-data", default="grasp-base", help="base dataset mixed 50/50 into every stage")
+    p.add_argument("--base-data", default="grasp-base", metavar="REF",
+                   help="base dataset mixed 50/50 into every stage")
     p.add_argument("--name", default="continual", help="run name (folder under $NSL_HOME/runs, dataset prefix)")
     p.add_argument("--episodes", type=int, default=800, help="attempts collected per stage")
     p.add_argument("--steps", type=int, default=4000, help="gradient steps per stage")
     p.add_argument("--eval-episodes", type=int, default=100, help="evaluation episodes per task and stage")
     p.add_argument("--epsilon", type=float, default=0.1, help="exploration during collection")
-    p.add_argument("--workers", type=int, default=1)
-    p.add_argument("--seed", type=int, default=0)
+    add_workers(p, help="simulator processes for collection and evaluation")
+    add_seed(p, help="seed of stage i's collection is seed + i; training uses seed")
     p.add_argument("--single", action="store_true", help="also fine-tune each shift in one step from --init")
     p.set_defaults(func=run)
 
@@ -109,30 +112,21 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cli(*argv: str) -> None:
-    from nsl.cli import main
-    from nsl.errors import NslError
-
-    if main(list(argv)) != 0:
-        raise NslError(f"stage command failed: nsl {' '.join(argv)}")
-
-
 def _stage(run: str, i: int, shift: str, policy: str, cfg: ContinualConfig) -> str:
     """Collect in ``shift`` with ``policy``, fine-tune it 50/50 with base data; return the checkpoint id."""
-    from nsl.catalog import Catalog
+    from nsl.commands.collect import collect
+    from nsl.commands.train import train
 
     data, name = f"{run}-{_slug(shift)}", f"{run}-s{i}-{_slug(shift)}"
-    _cli("collect", "--shift", shift, "--episodes", str(cfg.episodes), "--policy", policy, "--dataset", data,
-         "--workers", str(cfg.workers), "--batch", "8", "--seed", str(cfg.seed + i), "--epsilon", str(cfg.epsilon))
-    _cli("train", "--data", f"{cfg.base_data}=0.5", "--data", f"{data}=0.5", "--init", policy,
-         "--steps", str(cfg.steps), "--name", name, "--seed", str(cfg.seed), "--target-shift", shift)
-    with Catalog() as cat:
-        return cat.resolve_checkpoint(f"ckpt:{name}@latest").id
+    collect(shift=shift, episodes=cfg.episodes, policy=policy, data=data, workers=cfg.workers, batch_size=8,
+            seed=cfg.seed + i, epsilon=cfg.epsilon)
+    return train(data=[f"{cfg.base_data}=0.5", f"{data}=0.5"], init=policy, steps=cfg.steps, name=name,
+                 seed=cfg.seed, target_shift=shift).id
 
 
 def _single_step(run: str, matrix, cfg: ContinualConfig, init) -> object:
     """Fine-tune ``init`` on each stage's data in one step (Table 5.3's single-step column)."""
-    from nsl.catalog import Catalog
+    from nsl.commands.train import train
 
     single = {}
     for k, shift in enumerate(cfg.sequence):
@@ -140,29 +134,19 @@ def _single_step(run: str, matrix, cfg: ContinualConfig, init) -> object:
             single[shift] = matrix.rate(1, matrix.tasks.index(shift))
             continue
         data, name = f"{run}-{_slug(shift)}", f"{run}-single-{_slug(shift)}"
-        _cli("train", "--data", f"{cfg.base_data}=0.5", "--data", f"{data}=0.5", "--init", f"ckpt:{init.id}",
-             "--steps", str(cfg.steps), "--name", name, "--seed", str(cfg.seed), "--target-shift", shift)
-        with Catalog() as cat:
-            ckpt = cat.resolve_checkpoint(f"ckpt:{name}@latest").id
+        ckpt = train(data=[f"{cfg.base_data}=0.5", f"{data}=0.5"], init=f"ckpt:{init.id}", steps=cfg.steps,
+                     name=name, seed=cfg.seed, target_shift=shift).id
         single[shift] = _evaluate(f"ckpt:{ckpt}", (shift,), cfg)[shift]
     return type(matrix)(**{**matrix.__dict__, "single": {k: v.success_rate for k, v in single.items()}})
 
 
-
 def _evaluate(policy: str, tasks, cfg: ContinualConfig) -> dict:
-    from nsl.catalog import Catalog
-    from nsl.collectors import EnvConfig, parse_shift
-    from nsl.eval import EvalConfig, evaluate
-    from nsl.commands._refs import policy_factory, resolve_init
+    """Success of ``policy`` on each task (the eval command's defaults otherwise), catalogued as "continual"."""
+    from nsl.commands.eval import evaluate
 
-    config = EvalConfig(episodes=cfg.eval_episodes, workers=cfg.workers)
-    results = evaluate(policy_factory(policy, EnvConfig()), [parse_shift(t) for t in tasks], config)
-    with Catalog() as cat:
-        entry = resolve_init(cat, policy)
-        for t, r in results.items():
-            cat.add_evaluation(entry.id, t, episodes=r.episodes, successes=r.successes, seed=config.seed,
-                               ci=r.ci, extra={"source": "continual", "eval": config.to_dict()})
-    return results
+    result = evaluate([policy], shift=",".join(tasks), episodes=cfg.eval_episodes, workers=cfg.workers,
+                      source="continual")
+    return result["table"][policy]
 
 
 def _slug(shift: str) -> str:

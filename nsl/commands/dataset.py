@@ -7,34 +7,36 @@ import json
 from pathlib import Path
 from typing import Any
 
+from nsl.commands._options import add_json, add_parser
+
 REF_HELP = "dataset reference NAME[@vN][:K] (latest version by default; :K = first K episodes)"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("dataset", help="list, show, verify, tier and export datasets",
-                       description="Datasets live under $NSL_HOME/datasets/NAME/vN/ in LeRobot v3.0 layout.")
+    p = add_parser(sub, "dataset", help="list, show, verify, tier and export datasets",
+                   description="Datasets live under $NSL_HOME/datasets/NAME/vN/ in LeRobot v3.0 layout.")
     dsub = p.add_subparsers(dest="dataset_command", metavar="ACTION", required=True)
 
-    q = dsub.add_parser("ls", help="list every dataset version")
-    q.add_argument("--json", action="store_true", help="print JSON lines")
+    q = add_parser(dsub, "ls", help="list every dataset version")
+    add_json(q, '{"datasets": [...], "unfinished": [...]}')
     q.set_defaults(func=_ls)
 
-    q = dsub.add_parser("show", help="show a version: size, success rate, hash, provenance")
+    q = add_parser(dsub, "show", help="show a version: size, success rate, hash, provenance")
     q.add_argument("ref", help=REF_HELP)
-    q.add_argument("--json", action="store_true", help="print one JSON object")
+    add_json(q, "the version's description")
     q.set_defaults(func=_show)
 
-    q = dsub.add_parser("verify", help="re-hash a version's files against its manifest (all versions if no ref)")
+    q = add_parser(dsub, "verify", help="re-hash a version's files against its manifest (all versions if no ref)")
     q.add_argument("ref", nargs="?", help=REF_HELP)
     q.set_defaults(func=_verify)
 
-    q = dsub.add_parser("tiers", help="the nested first-K tiers of a version with their content hashes")
+    q = add_parser(dsub, "tiers", help="the nested first-K tiers of a version with their content hashes")
     q.add_argument("ref", help=REF_HELP)
-    q.add_argument("--sizes", default="25,50,100,200,400,800", help="tier sizes (default 25,50,100,200,400,800)")
-    q.add_argument("--json", action="store_true", help="print JSON lines")
+    q.add_argument("--sizes", default="25,50,100,200,400,800", help="comma-separated tier sizes")
+    add_json(q, '{"tiers": [...]}')
     q.set_defaults(func=_tiers)
 
-    q = dsub.add_parser("export", help="write a version or tier as a plain LeRobot dataset directory",
+    q = add_parser(dsub, "export", help="write a version or tier as a plain LeRobot dataset directory",
                         description="Write a plain LeRobot v3.0 directory (no nsl-only files, a README.md "
                                     "dataset card with the provenance), ready for `huggingface-cli upload`.")
     q.add_argument("ref", help=REF_HELP)
@@ -48,10 +50,7 @@ def _ls(args: argparse.Namespace) -> int:
 
     rows, pending = api.list_datasets(), api.unfinished()
     if args.json:
-        for r in rows:
-            print(json.dumps(r, sort_keys=True))
-        for r in pending:
-            print(json.dumps({"unfinished": r}, sort_keys=True))
+        print(json.dumps({"datasets": rows, "unfinished": pending}, sort_keys=True))
         return 0
     if not rows and not pending:
         print("no datasets yet; create one with `nsl collect ... --dataset NAME`")
@@ -106,8 +105,7 @@ def _tiers(args: argparse.Namespace) -> int:
         raise ConfigError(f"--sizes {args.sizes!r} must be comma-separated integers, e.g. 25,50,100") from None
     rows = api.tiers(args.ref, sizes)
     if args.json:
-        for r in rows:
-            print(json.dumps(r, sort_keys=True))
+        print(json.dumps({"tiers": rows}, sort_keys=True))
         return 0
     _table(rows, ["ref", "episodes", "frames", "success_rate", "content_hash"])
     print("tiers are nested views: each holds the first K episodes, so every smaller tier lies inside it")

@@ -5,22 +5,24 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from nsl.commands._options import add_parser, add_seed
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "render", help="write a PNG grid of first frames per shift (like Fig. 5.2)",
+    p = add_parser(
+        sub, "render", help="write a PNG grid of first frames per shift (like Fig. 5.2)",
         description="Render the first camera frame of several episodes for one shift or all of them. "
                     "Columns share scene seeds, so each row differs from the base row only by its shift.")
     p.add_argument("--shift", default="all",
                    help="shift spec (e.g. harsh_lighting, harsh_lighting+checkerboard_backing@0.5) or 'all' "
-                        "for one row per shift (default: all)")
+                        "for one row per shift")
     p.add_argument("--severity", type=float, default=None, help="severity for shifts given without @X (default 1.0)")
-    p.add_argument("--episodes", type=int, default=4, help="columns: episodes per shift (default 4)")
-    p.add_argument("--image-size", type=int, default=64, help="camera resolution (default 64)")
-    p.add_argument("--scale", type=int, default=3, help="upscaling factor for viewing (default 3)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--split", default="train", choices=["train", "test"], help="object split (default train)")
-    p.add_argument("--out", type=Path, default=Path("gallery.png"), help="output PNG (default gallery.png)")
+    p.add_argument("--episodes", type=int, default=4, help="columns: episodes per shift")
+    p.add_argument("--image-size", type=int, default=64, help="camera resolution in pixels")
+    p.add_argument("--scale", type=int, default=3, help="upscaling factor for viewing")
+    add_seed(p, help="scene seed: column i shows scene (seed, i)")
+    p.add_argument("--split", default="train", choices=["train", "test"], help="object split")
+    p.add_argument("--out", type=Path, default=Path("gallery.png"), help="output PNG")
     p.set_defaults(func=run)
 
 

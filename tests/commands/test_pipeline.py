@@ -24,9 +24,9 @@ def pipeline(home, monkeypatch):
     monkeypatch.setenv("NSL_HOME", str(home))
     if not (home / "runs" / "base-tiny").exists():
         assert run_cli("collect", "--shift", "base", "--episodes", "24", "--policy", "oracle:0.5",
-                       "--dataset", "grasp-base", "--batch", "4") == 0
+                       "--data", "grasp-base", "--batch-size", "4") == 0
         assert run_cli("collect", "--shift", "harsh_lighting", "--episodes", "12", "--policy", "oracle:0.5",
-                       "--dataset", "grasp-harsh", "--batch", "4") == 0
+                       "--data", "grasp-harsh", "--batch-size", "4") == 0
         assert run_cli("train", "--data", "grasp-base", "--steps", "8", "--name", "base-tiny",
                        "--checkpoint-every", "4") == 0
     return home
@@ -53,10 +53,10 @@ def test_fine_tuning_chain_is_catalogued_with_lineage(pipeline, capsys):
 
 def test_checkpoint_policy_collects_and_evaluations_are_stored(pipeline, capsys):
     assert run_cli("collect", "--shift", "harsh_lighting", "--episodes", "4", "--policy", "ckpt:base-tiny",
-                   "--dataset", "grasp-harsh-explore", "--batch", "4", "--epsilon", "0.2") == 0
+                   "--data", "grasp-harsh-explore", "--batch-size", "4", "--epsilon", "0.2") == 0
     capsys.readouterr()
     assert run_cli("eval", "--checkpoint", "ckpt:base-tiny", "--shift", "base,harsh_lighting", "--episodes", "4",
-                   "--batch", "4", "--json") == 0
+                   "--batch-size", "4", "--json") == 0
     out = json.loads(capsys.readouterr().out)
     assert set(out["results"]) == {"base", "harsh_lighting"}
     with Catalog() as cat:
@@ -166,3 +166,73 @@ def test_training_records_crop_and_n_step_and_refuses_data_from_an_older_environ
     assert run_cli("train", "--data", "grasp-old", "--steps", "2", "--name", "old-tiny") == 2
     err = capsys.readouterr().err.strip()
     assert "nsl-grasp-v2" in err and "collect it again" in err and len(err.splitlines()) == 1, err
+
+
+def test_td_criterion_chooses_a_step_by_held_out_td_error(pipeline, capsys):
+    from nsl.eval import read_curve
+
+    assert run_cli("train", "--data", "grasp-base=0.5", "--data", "grasp-harsh=0.5", "--init", "ckpt:base-tiny",
+                   "--steps", "4", "--name", "td-tiny", "--eval-every", "2", "--eval-episodes", "0",
+                   "--criterion", "td", "--holdout", "0.25", "--patience", "3") == 0
+    run_dir = workspace.runs_dir() / "td-tiny"
+    rows = read_curve(run_dir / "curve.csv")
+    assert [r.step for r in rows] == [0, 2, 4]
+    td = [r.td_error for r in rows]
+    assert all(t is not None and 0.0 <= t <= 1.0 for t in td)  # Q and its targets are probabilities
+    assert len(set(td)) > 1  # the network changes between evaluations, and so does its TD error
+    summary = json.loads((run_dir / "early_stop.json").read_text())
+    assert summary["criterion"] == "td" and summary["mode"] == "min"
+    assert summary["best_step"] == [r.step for r in rows][td.index(min(td))]
+    assert summary["best_value"] == pytest.approx(min(td))
+    out = capsys.readouterr().out
+    if summary["best_step"] == 0:  # the parent itself had the lowest TD error
+        assert "best by td: step 0, the starting point (base-tiny@" in out
+    else:  # the chosen step is catalogued, so it can be evaluated or fine-tuned further
+        assert f"best by td: ckpt:td-tiny@{summary['best_step']}" in out
+        with Catalog() as cat:
+            assert cat.resolve_checkpoint(f"ckpt:td-tiny@{summary['best_step']}").step == summary["best_step"]
+
+
+def test_efficiency_writes_tiers_json_that_the_report_reads(pipeline, capsys):
+    from nsl.eval import TierResults
+
+    args = ["efficiency", "--data", "grasp-harsh", "--sizes", "4,8,100", "--init", "ckpt:base-tiny",
+            "--base-data", "grasp-base", "--steps", "2", "--eval-episodes", "3", "--name", "eff"]
+    assert run_cli(*args) == 0
+    run_dir = workspace.runs_dir() / "eff"
+    tiers = TierResults.load(run_dir / "tiers.json")
+    assert list(tiers.rows) == ["harsh_lighting"] and tiers.tiers == [4, 8]  # 100 > the dataset's 12 episodes
+    row = tiers.rows["harsh_lighting"]
+    assert row.base.episodes == 3 and {k: r.episodes for k, r in row.tiers.items()} == {4: 3, 8: 3}
+    with Catalog() as cat:  # each cell is a catalogued fine-tune of the starting checkpoint on its tier
+        ckpt = cat.resolve_checkpoint("ckpt:eff-harsh-lighting-4@latest")
+        assert ckpt.parent == cat.resolve_checkpoint("ckpt:base-tiny@latest").id
+        assert [(d.dataset, d.tier) for d in ckpt.data] == [("grasp-base", None), ("grasp-harsh", "4")]
+        assert {e.shift for e in cat.evaluations(ckpt.id)} == {"harsh_lighting"}
+    capsys.readouterr()
+    assert run_cli(*args) == 0  # everything measured: nothing is trained or evaluated again
+    out = capsys.readouterr().out
+    assert "tier 4 done earlier" in out and "tier 8 done earlier" in out
+    assert TierResults.load(run_dir / "tiers.json") == tiers
+    assert run_cli("report", "eff") == 0
+    report = (run_dir / "report" / "report.md").read_text()
+    assert "| challenge | base | 4 | 8 | best (change) |" in report
+    with pytest.raises(ConfigError, match="different configuration"):
+        run_cli("--debug", *args[:-2], "--name", "eff", "--steps", "3")
+
+
+def test_continual_reports_a_stage_error_once_and_debug_shows_it(pipeline, monkeypatch, capsys):
+    import nsl.commands.collect as collect_command
+
+    def failing_collect(**kwargs):
+        raise ConfigError(f"collection of {kwargs['data']} refused")
+
+    monkeypatch.setattr(collect_command, "collect", failing_collect)
+    args = ["continual", "--sequence", "harsh_lighting", "--init", "ckpt:base-tiny", "--base-data", "grasp-base",
+            "--episodes", "4", "--steps", "2", "--eval-episodes", "2", "--name", "cont-error"]
+    assert run_cli(*args) == 2
+    err = capsys.readouterr().err
+    assert [line for line in err.splitlines() if line.startswith("nsl: error:")] == [
+        "nsl: error: collection of cont-error-harsh-lighting refused"]
+    with pytest.raises(ConfigError, match="collection of cont-error-harsh-lighting refused"):
+        run_cli("--debug", *args)  # the stage's own exception, with its traceback

@@ -37,7 +37,7 @@ def test_shipped_base_loads_and_records_its_recipe():
 
 
 def test_ckpt_base_falls_back_to_the_shipped_checkpoint_and_is_catalogued(capsys):
-    assert run_cli("eval", "--checkpoint", "ckpt:base", "--episodes", "4", "--batch", "4", "--json") == 0
+    assert run_cli("eval", "--checkpoint", "ckpt:base", "--episodes", "4", "--batch-size", "4", "--json") == 0
     out = json.loads(capsys.readouterr().out)
     assert out["results"]["base"]["episodes"] == 4
     with Catalog() as cat:
@@ -66,7 +66,7 @@ def test_shipped_base_fine_tunes_to_harsh_lighting(capsys):
     steps of the study's fine-tune on the demo's data lift harsh-lighting success from 13% to 60% on these scenes."""
     for shift, name in (("base", "demo-base"), ("harsh_lighting", "demo-harsh")):
         assert run_cli("collect", "--shift", shift, "--episodes", "600" if shift == "base" else "100",
-                       "--policy", "oracle:1.0", "--dataset", name, "--workers", "2", "--batch", "4") == 0
+                       "--policy", "oracle:1.0", "--data", name, "--workers", "2", "--batch-size", "4") == 0
     assert run_cli("train", "--data", "demo-base=0.5", "--data", "demo-harsh=0.5", "--init", "ckpt:base",
                    "--steps", "300", "--name", "plastic") == 0
     capsys.readouterr()

@@ -33,7 +33,7 @@ def _assert_lerobot_matches(ds, ours: dict[str, np.ndarray]) -> None:
 
 def test_lerobot_opens_a_collected_dataset_with_identical_content(lerobot_offline, tmp_path):
     assert run_cli("collect", "--shift", "harsh_lighting", "--episodes", "6", "--policy", "oracle:0.5",
-                   "--dataset", "grasp-harsh", "--episodes-per-file", "4") == 0
+                   "--data", "grasp-harsh", "--episodes-per-file", "4") == 0
     view = api.open_view("grasp-harsh")
     ours = view.episodes_arrays()
     assert ours[keys.OBS_IMAGE].shape == (view.num_frames, 64, 64, 3)

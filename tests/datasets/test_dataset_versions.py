@@ -23,7 +23,7 @@ COLLECT = ["collect", "--shift", "checkerboard_backing", "--episodes", "10", "--
 
 
 def _collect(name: str, *extra: str) -> int:
-    return run_cli(*COLLECT, "--dataset", name, *extra)
+    return run_cli(*COLLECT, "--data", name, *extra)
 
 
 def test_resumed_and_parallel_collections_equal_an_uninterrupted_one(capsys):
@@ -47,7 +47,7 @@ def test_resumed_and_parallel_collections_equal_an_uninterrupted_one(capsys):
 
 def test_killed_collection_leaves_no_version_and_resumes_to_the_same_hash():
     argv = [sys.executable, "-m", "nsl", *COLLECT, "--episodes", "16", "--episodes-per-file", "2",
-            "--dataset", "killed"]
+            "--data", "killed"]
     proc = subprocess.Popen(argv, cwd=ROOT, env={**os.environ}, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     staged = api.dataset_root("killed") / ".staging/data/chunk-000/file-000.parquet"
@@ -61,8 +61,8 @@ def test_killed_collection_leaves_no_version_and_resumes_to_the_same_hash():
     assert staged.exists()
     assert api.list_versions("killed") == [] and api.dataset_names() == []
 
-    assert run_cli(*COLLECT, "--episodes", "16", "--episodes-per-file", "2", "--dataset", "killed") == 0
-    assert run_cli(*COLLECT, "--episodes", "16", "--episodes-per-file", "2", "--dataset", "fresh") == 0
+    assert run_cli(*COLLECT, "--episodes", "16", "--episodes-per-file", "2", "--data", "killed") == 0
+    assert run_cli(*COLLECT, "--episodes", "16", "--episodes-per-file", "2", "--data", "fresh") == 0
     assert api.open_version("killed").hash == api.open_version("fresh").hash
     assert not (api.dataset_root("killed") / ".staging").exists()
 
@@ -115,8 +115,8 @@ def test_refs_and_settings_errors(make_synth):
     assert _collect("mixed", "--stop-after-files", "1") == 130
     with pytest.raises(ConfigError, match="unfinished collection with other settings.*--restart"):
         run_cli("--debug", "collect", "--shift", "base", "--episodes", "10", "--policy", "oracle:0.5",
-                "--dataset", "mixed")
+                "--data", "mixed")
     assert _collect("mixed", "--episodes", "3") == 0  # same settings, fewer episodes: resumes and publishes
     with pytest.raises(ConfigError, match="collected with other settings"):
         run_cli("--debug", "collect", "--shift", "base", "--episodes", "6", "--policy", "oracle:0.5",
-                "--dataset", "mixed")
+                "--data", "mixed")

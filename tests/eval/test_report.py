@@ -9,7 +9,7 @@ from PIL import Image
 
 from nsl.errors import CorruptDataError, UnknownReferenceError
 from nsl.eval import (CurveRow, EarlyStopConfig, PerformanceMatrix, Rate, TierResults, TierRow, plot_curve,
-                      read_curve, tiers_table, write_curve, write_report)
+                      plot_tiers, read_curve, tiers_table, write_curve, write_report)
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -120,3 +120,10 @@ def test_report_errors(tmp_path):
     (bad / "tiers.json").write_text(json.dumps({"rows": [{"base": {"success_rate": 0.5}}]}))
     with pytest.raises(CorruptDataError, match="lacks the field 'shift'"):
         write_report(bad)
+
+
+def test_tier_plot_takes_rates_of_zero_and_one(tmp_path):
+    """At 0% or 100% the Wilson bound equals the rate up to rounding; the error bar must not go negative."""
+    tiers = TierResults({"harsh_lighting": TierRow(Rate(0.0, 3), {4: Rate(1.0, 3), 8: Rate(0.0, 3)}, {})})
+    out = plot_tiers(tiers, tmp_path / "tiers.png")
+    assert out.stat().st_size > 0

@@ -1,0 +1,67 @@
+"""The options every command spells the same way, and the help style they share.
+
+One name per idea across all commands (``tests/test_cli_options.py`` checks it):
+
+* ``--data``: dataset references (``NAME[@vN][:K]``), or the name a collection writes;
+* ``--checkpoint``: a checkpoint to use as it is; ``--init``: the parent a run starts from;
+* ``--batch-size``: how many items one batched call handles (transitions, or environments in lock-step);
+* ``--workers``: worker processes; ``--seed``: the seed; ``--json``: one JSON document on stdout, nothing else.
+
+Help texts show their defaults through :class:`HelpFormatter`.  Options that
+were renamed keep working under their old spelling (:data:`RENAMED`), with a note.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """Keeps descriptions as written and adds "(default: X)" where the help does not already say it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if ("default" in text or default is None or default is False or default == [] or default == argparse.SUPPRESS
+                or not action.option_strings):
+            return text
+        return super()._get_help_string(action)
+
+
+def add_parser(sub: argparse._SubParsersAction, name: str, **kwargs) -> argparse.ArgumentParser:
+    """A subcommand parser in the shared help style."""
+    return sub.add_parser(name, formatter_class=HelpFormatter, **kwargs)
+
+
+# Old spellings still accepted (nsl.cli.main rewrites them and says the new name on stderr).
+RENAMED = {"--dataset": "--data", "--batch": "--batch-size"}
+
+
+def rename_old_options(argv: list[str]) -> list[str]:
+    """``argv`` with retired option spellings replaced by the current ones (a note for each on stderr)."""
+    out = []
+    for arg in argv:
+        name, eq, value = arg.partition("=")
+        if name in RENAMED:
+            print(f"nsl: {name} is now {RENAMED[name]}; the old name will go away", file=sys.stderr)
+            arg = RENAMED[name] + eq + value
+        out.append(arg)
+    return out
+
+
+def add_json(p: argparse.ArgumentParser, what: str = "the result") -> None:
+    p.add_argument("--json", action="store_true", help=f"print {what} as one JSON document on stdout, nothing else")
+
+
+def add_workers(p, help: str = "worker processes (the results do not depend on it)") -> None:
+    p.add_argument("--workers", type=int, default=1, help=help)
+
+
+def add_seed(p, default: int = 0, help: str = "seed") -> None:
+    p.add_argument("--seed", type=int, default=default, help=help)
+
+
+def add_env_batch_size(p, default: int) -> None:
+    p.add_argument("--batch-size", type=int, default=default,
+                   help="environments per worker stepping in lock-step; the policy acts on them as one batch")
