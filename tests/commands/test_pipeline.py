@@ -207,7 +207,7 @@ def test_efficiency_writes_tiers_json_that_the_report_reads(pipeline, capsys):
     with Catalog() as cat:  # each cell is a catalogued fine-tune of the starting checkpoint on its tier
         ckpt = cat.resolve_checkpoint("ckpt:eff-harsh-lighting-4@latest")
         assert ckpt.parent == cat.resolve_checkpoint("ckpt:base-tiny@latest").id
-        assert [(d.dataset, d.tier) for d in ckpt.data] == [("grasp-base", None), ("grasp-harsh", "4")]
+        assert [(d.dataset, d.tier) for d in ckpt.data] == [("grasp-base", None), ("grasp-harsh", 4)]
         assert {e.shift for e in cat.evaluations(ckpt.id)} == {"harsh_lighting"}
     capsys.readouterr()
     assert run_cli(*args) == 0  # everything measured: nothing is trained or evaluated again
