@@ -81,14 +81,20 @@ def render_model_card(entry: CheckpointEntry, ancestors: Sequence[CheckpointEntr
 
     ``ancestors`` is the parent chain (parent first); ``datasets`` maps
     (name, version) to the rows of the datasets ``entry`` used.  ``info`` may
-    hold ``summary`` (a paragraph), ``tags`` (extra tags) and ``license``.
+    hold ``summary`` (a paragraph), ``tags`` (extra tags), ``license`` and
+    ``published``: the published lineage (``nsl.catalog.published_lineage``),
+    which then gives the data and ancestors, including those known only from
+    a pull.
     """
     info = dict(info or {})
+    published = list(info.get("published") or [])
     results = pooled_results(evaluations)
     tags = list(dict.fromkeys([*BASE_TAGS, *info.get("tags", ()), entry.shift]))
     out = [_front_matter(entry, results, tags, str(info.get("license", "apache-2.0")))]
     out.append(f"# {entry.name} @ step {entry.step}\n")
     origin = (f"fine-tuned from `{ancestors[0].ref}` (`{ancestors[0].short_id}`)" if ancestors
+              else f"fine-tuned from `{published[1]['name']}@{published[1]['step']}` (`{published[1]['id'][:12]}`)"
+              if len(published) > 1
               else f"fine-tuned from a removed checkpoint `{entry.parent[:12]}`" if entry.parent
               else "trained from scratch")
     out.append(
@@ -101,7 +107,13 @@ def render_model_card(entry: CheckpointEntry, ancestors: Sequence[CheckpointEntr
                f"- gradient step: {entry.step}\n- code version: `{entry.code_version}`\n- created: {entry.created}\n")
 
     out.append("## Training data\n")
-    if entry.data:
+    if published and published[0].get("data"):
+        out.append("| dataset | shift | episodes | tier | batch weight | content hash |\n|---|---|---|---|---|---|")
+        for d in published[0]["data"]:
+            out.append(f"| `{d['dataset']}@v{d['version']}` | {d.get('shift', '?')} | {d.get('episodes', '?')} | "
+                       f"{d.get('tier') or 'all'} | {d['weight']:g} | `{d.get('hash') or '?'}` |")
+        out.append("")
+    elif entry.data:
         out.append("| dataset | shift | episodes | tier | batch weight | content hash |\n|---|---|---|---|---|---|")
         for u in entry.data:
             d = datasets.get((u.dataset, u.version))
@@ -115,12 +127,21 @@ def render_model_card(entry: CheckpointEntry, ancestors: Sequence[CheckpointEntr
 
     out.append("## Lineage\n")
     out.append("Newest first; each checkpoint started from the weights of the one below it.\n")
-    for c in [entry, *ancestors]:
-        uses = ", ".join(f"{u.dataset}@v{u.version}{':' + u.tier if u.tier else ''} x{u.weight:g}" for u in c.data)
-        out.append(f"- `{c.ref}` (`{c.short_id}`), shift {c.shift}; data: {uses or 'none'}")
-    last = ancestors[-1] if ancestors else entry
-    if last.parent:
-        out.append(f"- `{last.parent[:12]}` (removed from the catalog)")
+    if published:
+        for n in published:
+            uses = ", ".join(f"{d['dataset']}@v{d['version']}{':' + d['tier'] if d.get('tier') else ''} "
+                             f"x{d['weight']:g}" for d in n.get("data", []))
+            out.append(f"- `{n['name']}@{n['step']}` (`{str(n['id'])[:12]}`), shift {n['shift']}; "
+                       f"data: {uses or 'none'}")
+        if published[-1].get("parent"):
+            out.append(f"- `{str(published[-1]['parent'])[:12]}` (not published)")
+    else:
+        for c in [entry, *ancestors]:
+            uses = ", ".join(f"{u.dataset}@v{u.version}{':' + u.tier if u.tier else ''} x{u.weight:g}" for u in c.data)
+            out.append(f"- `{c.ref}` (`{c.short_id}`), shift {c.shift}; data: {uses or 'none'}")
+        last = ancestors[-1] if ancestors else entry
+        if last.parent:
+            out.append(f"- `{last.parent[:12]}` (removed from the catalog)")
     out.append("")
 
     out.append("## Evaluation\n")
@@ -150,38 +171,91 @@ def _head(c: CheckpointEntry) -> str:
 
 
 def _data_line(cat: Catalog, u: DataUse) -> str:
+    from .origins import origin_of
+
     tier = f":{u.tier}" if u.tier else ""
     try:
         d = cat.dataset(u.dataset, u.version)
         what = f"{d.shift_name}, {d.episodes} episodes"
         if u.hash and d.hash != u.hash:
             what += ", CONTENT CHANGED since training"
+        o = origin_of(cat, "dataset", d.ref, d.hash)
+        if o is not None:
+            what += f", pulled from {o.url} at {o.revision[:12]}"
     except UnknownReferenceError:
         what = "removed from the catalog"
     return f"data: {u.dataset}@v{u.version}{tier} ({what}), weight {u.weight:g}"
 
 
+def _published_data_line(cat: Catalog, d: Mapping[str, Any]) -> str:
+    """A dataset named in a pulled checkpoint's published lineage (maybe not in this workspace)."""
+    try:
+        row = cat.dataset(d["dataset"], d["version"])
+        if row.hash == d.get("hash"):
+            return _data_line(cat, DataUse(d["dataset"], d["version"], d["weight"], d.get("tier"), d["hash"]))
+    except UnknownReferenceError:
+        pass
+    tier = f":{d['tier']}" if d.get("tier") else ""
+    what = ", ".join(x for x in (d.get("shift"), f"{d['episodes']} episodes" if "episodes" in d else None) if x)
+    return (f"data: {d['dataset']}@v{d['version']}{tier} ({what + ', ' if what else ''}hash "
+            f"{short_hash(d.get('hash'))}; published, not in this workspace), weight {d['weight']:g}")
+
+
+def _eval_text(r: Mapping[str, Any]) -> str:
+    return (f"eval: {r['shift']} ({r['split']} objects) {100 * r['rate']:.1f}% "
+            f"[{100 * r['ci_low']:.1f}, {100 * r['ci_high']:.1f}] over {r['episodes']} episodes")
+
+
 def _eval_lines(cat: Catalog, c: CheckpointEntry) -> list[str]:
-    out = []
-    for r in pooled_results(cat.evaluations(c.id)):
-        out.append(f"eval: {r['shift']} ({r['split']} objects) {100 * r['rate']:.1f}% "
-                   f"[{100 * r['ci_low']:.1f}, {100 * r['ci_high']:.1f}] over {r['episodes']} episodes")
-    return out
+    return [_eval_text(r) for r in pooled_results(cat.evaluations(c.id))]
+
+
+def _published_tail(cat: Catalog, nodes: Sequence[Mapping[str, Any]], depth: int, evaluations: bool) -> list[str]:
+    """Ancestors known only from a pulled checkpoint's published lineage, drawn like local ones."""
+    lines = []
+    for i, n in enumerate(nodes):
+        d = depth + i
+        lines.append(f"{INDENT * (d - 1)}└─ from {n['name']}@{n['step']}  {str(n['id'])[:12]}  trained for "
+                     f"{n['shift']} (published lineage; not in this workspace)")
+        items = [_published_data_line(cat, x) for x in n.get("data", [])] or ["data: none recorded"]
+        if evaluations:
+            items += [_eval_text(r) for r in n.get("evaluations", [])]
+        lines += [f"{INDENT * d}├─ {item}" for item in items]
+    last = nodes[-1]
+    tail = f"from {str(last['parent'])[:12]} (not published)" if last.get("parent") else "from scratch (no parent)"
+    lines.append(f"{INDENT * (depth + len(nodes) - 1)}└─ {tail}")
+    return lines
 
 
 def format_lineage(cat: Catalog, ref: str, evaluations: bool = True) -> str:
-    """The ancestry of ``ref`` as an indented tree, newest checkpoint on top."""
+    """The ancestry of ``ref`` as an indented tree, newest checkpoint on top.
+
+    A pulled checkpoint shows where it came from (``origin:``), and the data
+    and ancestors of its published lineage that are not in this workspace.
+    """
+    from .origins import origin_of
+
     chain = cat.lineage(ref)
     lines: list[str] = []
     for depth, c in enumerate(chain):
         pad = INDENT * depth
         lines.append(_head(c) if depth == 0 else f"{INDENT * (depth - 1)}└─ from {_head(c)}")
-        items = [_data_line(cat, u) for u in c.data] or ["data: none recorded"]
+        o = origin_of(cat, "checkpoint", c.id)
+        published = o.lineage if o is not None and o.lineage and o.lineage[0].get("id") == c.id else []
+        items = [f"origin: pulled from {o.url} (revision {o.revision}) on {o.created.replace('T', ' ')}"] if o else []
+        have = {(u.dataset, u.version, u.tier) for u in c.data}
+        data = [_data_line(cat, u) for u in c.data]
+        data += [_published_data_line(cat, d) for d in (published[0].get("data", []) if published else [])
+                 if (d["dataset"], d["version"], d.get("tier")) not in have]
+        items += data or ["data: none recorded"]
         if evaluations:
             items += _eval_lines(cat, c)
         for item in items:
             lines.append(f"{pad}├─ {item}")
         if depth == len(chain) - 1:
+            if c.parent is None and len(published) > 1:
+                lines += _published_tail(cat, published[1:], depth + 1, evaluations)
+                continue
             tail = (f"from {c.parent[:12]} (removed from the catalog)" if c.parent else "from scratch (no parent)")
             lines.append(f"{pad}└─ {tail}")
     return "\n".join(lines)
