@@ -102,9 +102,8 @@ def s3(s3_server, monkeypatch, request):
     import fsspec.config
     import s3fs
 
-    for var, value in (("AWS_ACCESS_KEY_ID", "testing"), ("AWS_SECRET_ACCESS_KEY", "testing"),
-                       ("AWS_SESSION_TOKEN", "testing"), ("AWS_SECURITY_TOKEN", "testing")):
-        monkeypatch.setenv(var, value)
+    for var in ("AWS_ACCESS_KEY_ID", "AWS_SECRET_ACCESS_KEY"):
+        monkeypatch.setenv(var, "testing")  # dummy credentials: the server accepts any
     monkeypatch.delenv("AWS_PROFILE", raising=False)
     monkeypatch.setitem(fsspec.config.conf, "s3", {"client_kwargs": {"endpoint_url": s3_server.endpoint}})
     s3fs.S3FileSystem.clear_instance_cache()
