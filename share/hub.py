@@ -100,9 +100,11 @@ class HubRemote:
         with tempfile.TemporaryDirectory(prefix="nsl-hub-") as tmp:
             try:
                 path = self._download(rel, revision, Path(tmp))
+            except LocalEntryNotFoundError as e:  # offline: not the same as "the file is not there"
+                raise self._fail(f"reading {rel}", e) from None
             except EntryNotFoundError:
                 return None
-            except (HfHubHTTPError, LocalEntryNotFoundError, OSError) as e:
+            except (HfHubHTTPError, OSError) as e:
                 raise self._fail(f"reading {rel}", e) from None
             try:
                 out = json.loads(Path(path).read_text())
@@ -119,9 +121,15 @@ class HubRemote:
         try:
             path = self._download(rel, revision, incoming)
             os.replace(path, dest)
+        except LocalEntryNotFoundError as e:
+            raise self._fail(f"downloading {rel}", e) from None
         except EntryNotFoundError:
             raise FileNotFoundError(rel) from None
-        except (HfHubHTTPError, LocalEntryNotFoundError) as e:
+        except HfHubHTTPError as e:
+            raise self._fail(f"downloading {rel}", e) from None
+        except OSError as e:
+            if isinstance(e, FileNotFoundError):
+                raise
             raise self._fail(f"downloading {rel}", e) from None
         finally:
             shutil.rmtree(incoming, ignore_errors=True)

@@ -63,6 +63,9 @@ def parse_remote(text: str) -> Location:
         return _hub(text, revision)
     if "://" not in text:
         text = "file://" + os.path.abspath(os.path.expanduser(text))
+    elif "@" in text.split("://", 1)[1].split("/", 1)[0]:
+        raise ConfigError(f"remote {text.split('://', 1)[0]}://... carries credentials in the URL; put them in "
+                          "fsspec's configuration or the store's usual place (e.g. AWS_PROFILE) instead")
     return Location(text.rstrip("/") or text, revision)
 
 

@@ -166,9 +166,13 @@ def _push_dataset_hub(remote, root: Path, manifest: dict, name: str, version: in
     commit = remote.commit({**send, CARD: card.encode(), MANIFEST: (root / MANIFEST).read_bytes()}, delete,
                            f"nsl: {name} v{version} ({manifest['hash']})")
     remote.tag(tag, commit)
-    remote.tag(LEROBOT_TAG, commit, move=True)
+    moved = []
+    newest = max((int(m[1]) for t in tags if (m := VERSION_TAG.fullmatch(t))), default=0)
+    if version >= newest:  # LeRobot loads the v3.0 tag: keep it on the newest version
+        remote.tag(LEROBOT_TAG, commit, move=LEROBOT_TAG in tags)
+        moved = [LEROBOT_TAG]
     return PushResult(remote.url, commit, uploaded=sorted([*send, CARD, MANIFEST]),
-                      unchanged=sorted(set(files) - set(send)), tags=[tag, LEROBOT_TAG])
+                      unchanged=sorted(set(files) - set(send)), tags=[tag, *moved])
 
 
 def _push_dataset_fs(remote, root: Path, manifest: dict, version: int, card: str) -> PushResult:
