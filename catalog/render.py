@@ -145,6 +145,9 @@ def render_model_card(entry: CheckpointEntry, ancestors: Sequence[CheckpointEntr
     out.append("")
 
     out.append("## Evaluation\n")
+    if not results and published and published[0].get("evaluations"):
+        results = published[0]["evaluations"]
+        out.append("Not evaluated in this workspace yet; these are the evaluations it was published with.\n")
     if results:
         out.append("Grasp success rate, pooled over evaluation runs, with 95% Wilson intervals.\n")
         out.append("| shift | objects | episodes | success | 95% interval |\n|---|---|---|---|---|")
@@ -242,14 +245,18 @@ def format_lineage(cat: Catalog, ref: str, evaluations: bool = True) -> str:
         lines.append(_head(c) if depth == 0 else f"{INDENT * (depth - 1)}└─ from {_head(c)}")
         o = origin_of(cat, "checkpoint", c.id)
         published = o.lineage if o is not None and o.lineage and o.lineage[0].get("id") == c.id else []
-        items = [f"origin: pulled from {o.url} (revision {o.revision}) on {o.created.replace('T', ' ')}"] if o else []
-        have = {(u.dataset, u.version, u.tier) for u in c.data}
-        data = [_data_line(cat, u) for u in c.data]
-        data += [_published_data_line(cat, d) for d in (published[0].get("data", []) if published else [])
-                 if (d["dataset"], d["version"], d.get("tier")) not in have]
+        when = o.created.replace("T", " ").replace("Z", " UTC") if o else ""
+        items = [f"origin: pulled from {o.url} (revision {o.revision}) on {when}"] if o else []
+        if published:  # as published, in its order; datasets that are here show as local ones
+            shown = {(d["dataset"], d["version"], d.get("tier")) for d in published[0].get("data", [])}
+            data = [_published_data_line(cat, d) for d in published[0].get("data", [])]
+            data += [_data_line(cat, u) for u in c.data if (u.dataset, u.version, u.tier) not in shown]
+        else:
+            data = [_data_line(cat, u) for u in c.data]
         items += data or ["data: none recorded"]
         if evaluations:
             items += _eval_lines(cat, c)
+            items += [_eval_text(r) + " (published)" for r in (published[0].get("evaluations", []) if published else [])]
         for item in items:
             lines.append(f"{pad}├─ {item}")
         if depth == len(chain) - 1:

@@ -66,8 +66,11 @@ def test_round_trip_into_an_empty_workspace(publisher, remote, workspace_b, lero
     assert any(line.startswith(f"└─ from base-syn@2  {base.short_id}  trained for synthetic (published lineage")
                for line in lines)
     assert lines[-1] == "   └─ from scratch (no parent)"
+    assert any(line.startswith("├─ eval: synthetic (test objects) 45.0% [") and line.endswith("(published)")
+               for line in lines)
     card = (Path(entry.path) / "README.md").read_text()
     assert f"fine-tuned from `base-syn@2` (`{base.short_id}`)" in card and v1.hash in card
+    assert "the evaluations it was published with" in card and "| synthetic | test | 20 | 45.0% |" in card
     # the pulled checkpoint fine-tunes like a local one
     assert run_cli("train", "--data", "grasp-syn", "--init", "ckpt:ft-syn", "--steps", "2", "--batch-size", "8",
                    "--name", "ft2") == 0
