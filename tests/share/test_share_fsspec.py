@@ -82,6 +82,23 @@ def test_round_trip_into_an_empty_workspace(publisher, remote, workspace_b, lero
     assert f"origin: pulled from {remote}/ft-syn" in out and "base-syn@2" in out
 
 
+def test_a_parent_pulled_first_is_linked(publisher, tmp_path, workspace_b, capsys):
+    with Catalog() as cat:
+        base, ft = cat.resolve_checkpoint("ckpt:base-syn"), cat.resolve_checkpoint("ckpt:ft-syn")
+    remote = tmp_path / "remote"
+    assert run_cli("push", "ckpt:base-syn", str(remote / "base")) == 0
+    assert run_cli("push", "ckpt:ft-syn", str(remote / "ft")) == 0
+    workspace_b()
+    assert run_cli("pull", str(remote / "base")) == 0 and run_cli("pull", str(remote / "ft")) == 0
+    with Catalog() as cat:
+        assert [c.id for c in cat.lineage("ckpt:ft-syn")] == [ft.id, base.id]
+    capsys.readouterr()
+    assert run_cli("catalog", "lineage", "ckpt:ft-syn") == 0
+    out = capsys.readouterr().out
+    assert f"└─ from base-syn@2  {base.short_id}  trained for synthetic, " in out  # a local node now
+    assert "not in this workspace)\n   └─" not in out
+
+
 def test_a_second_push_of_the_same_version_uploads_nothing(publisher, s3, s3_server, capsys):
     dest = f"{s3}/lab/grasp-syn"
     before = len(s3_server.requests)

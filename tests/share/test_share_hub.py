@@ -53,7 +53,9 @@ def test_dataset_versions_are_commits_with_tags_that_lerobot_loads(publisher, hu
     assert (o.url, o.revision, o.published["version"]) == (f"hf://datasets/{REPO}", c2, 2)
 
 
-def test_a_checkpoint_is_a_model_repo_and_pulls_with_its_origin(publisher, hub, workspace_b, capsys):
+def test_a_checkpoint_is_a_model_repo_and_pulls_with_its_origin(publisher, hub, workspace_b, capsys, monkeypatch):
+    token = "hf_" + "Zx9" * 12
+    monkeypatch.setenv("HF_TOKEN", token)  # the standard way; nsl must never show or store it
     with Catalog() as cat:
         ft = cat.resolve_checkpoint("ckpt:ft-syn")
     assert run_cli("push", "ckpt:ft-syn", "hf://lab/ft-syn") == 0
@@ -79,7 +81,11 @@ def test_a_checkpoint_is_a_model_repo_and_pulls_with_its_origin(publisher, hub, 
     assert entry.id == ft.id and (entry.name, entry.step) == ("theirs", ft.step)
     assert (o.url, o.revision) == ("hf://lab/ft-syn", commit) and o.lineage[1]["name"] == "base-syn"
     assert run_cli("pull", "hf://lab/ft-syn") == 0  # the same checkpoint again: nothing new is registered
-    assert "already in the catalog" in capsys.readouterr().out
+    captured = capsys.readouterr()
+    assert "already in the catalog" in captured.out
+    home = workspace_b()
+    stored = [p.read_bytes() for p in home.rglob("*") if p.is_file()] + list(files.values())
+    assert token not in captured.out + captured.err and not any(token.encode() in b for b in stored)
 
 
 def test_an_altered_hub_file_is_refused_and_a_killed_pull_resumes(publisher, hub, workspace_b, capsys):
