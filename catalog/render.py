@@ -256,7 +256,8 @@ def format_lineage(cat: Catalog, ref: str, evaluations: bool = True) -> str:
         items += data or ["data: none recorded"]
         if evaluations:
             items += _eval_lines(cat, c)
-            items += [_eval_text(r) + " (published)" for r in (published[0].get("evaluations", []) if published else [])]
+            pub_evals = published[0].get("evaluations", []) if published else []
+            items += [_eval_text(r) + " (published)" for r in pub_evals]
         for item in items:
             lines.append(f"{pad}├─ {item}")
         if depth == len(chain) - 1:

@@ -109,7 +109,7 @@ def kind_of(manifest: dict[str, Any], where: str) -> str:
                            "manifest; was it pushed with `nsl push`?")
 
 
-def _check(path: Path, want: dict[str, Any], where: str, rel: str) -> str | None:
+def _check(path: Path, want: dict[str, Any]) -> str | None:
     """None if ``path`` matches ``want`` (size and sha256), else a description of the difference."""
     size = path.stat().st_size
     if size != want["size"]:
@@ -347,7 +347,7 @@ def _download(remote, pulled: Pulled, base: str) -> None:
             p.unlink()
     for rel in sorted(files):
         want, dest = files[rel], folder / rel
-        if dest.is_file() and _check(dest, want, where, rel) is None:
+        if dest.is_file() and _check(dest, want) is None:
             pulled.reused.append(rel)
             continue
         dest.parent.mkdir(parents=True, exist_ok=True)
@@ -358,7 +358,7 @@ def _download(remote, pulled: Pulled, base: str) -> None:
             except FileNotFoundError:
                 raise CorruptDataError(f"{where}: file {rel} is in the published {MANIFEST} but missing on the "
                                        "remote; the push was incomplete, push it again") from None
-            problem = _check(tmp, want, where, rel)
+            problem = _check(tmp, want)
             if problem is not None:
                 raise CorruptDataError(f"{where}: file {rel} does not match the published {MANIFEST} ({problem}); "
                                        "the remote copy was altered or is incomplete, nothing was registered")

@@ -155,7 +155,8 @@ def _place_dataset(cat, pulled, as_name: str | None) -> str:
     version = api.open_version(f"{name}@v{pulled.version}")
     register_dataset(cat, version)
     record_origin(cat, "dataset", version.ref, hash=version.hash, url=pulled.url, revision=pulled.revision,
-                  published={"name": pulled.location.name, "version": pulled.version, "requested": str(pulled.location)})
+                  published={"name": pulled.location.name, "version": pulled.version,
+                             "requested": str(pulled.location)})
     return f"data:{version.ref} ({version.hash})"
 
 
