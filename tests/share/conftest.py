@@ -107,7 +107,7 @@ def s3(s3_server, monkeypatch, request):
     monkeypatch.delenv("AWS_PROFILE", raising=False)
     monkeypatch.setitem(fsspec.config.conf, "s3", {"client_kwargs": {"endpoint_url": s3_server.endpoint}})
     s3fs.S3FileSystem.clear_instance_cache()
-    bucket = "nsl-" + request.node.name.lower().replace("_", "-").replace("[", "-").replace("]", "")[:40]
+    bucket = ("nsl-" + request.node.name.lower().replace("_", "-").replace("[", "-").replace("]", ""))[:40].rstrip("-")
     fs = s3fs.S3FileSystem(client_kwargs={"endpoint_url": s3_server.endpoint})
     fs.mkdir(bucket)
     yield f"s3://{bucket}"
