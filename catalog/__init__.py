@@ -19,6 +19,7 @@ surface (import from ``nsl.catalog``)::
     render_model_card
     format_lineage, format_descendants                                       # text trees (catalog/lineage.py)
     remove, gc_plan, gc_apply, verify                                        # maintenance
+    Origin, record_origin, origin_of, published_lineage                      # pulled entries
     SCHEMA_VERSION, MIGRATIONS, wilson_interval
 
 ``ckpt:base`` falls back to the checkpoint shipped in ``nsl/assets/base``:
@@ -30,6 +31,7 @@ learner.  The folder is a leaf: it imports no other nsl folder.
 from .folders import (
     CARD_FILE, CONFIG_FILE, WEIGHTS_FILE, checkpoint_id, folder_checkpoint_id, folder_digests, write_model_folder,
 )
+from .origins import Origin, origin_of, published_lineage, record_origin
 from .maintenance import GcItem, Problem, VerifyReport, gc_apply, gc_plan, remove, verify
 from .records import (
     CheckpointEntry, CheckpointRef, DataRef, DatasetEntry, DataUse, EvaluationEntry, ResolvedData,
@@ -42,8 +44,9 @@ from .store import Catalog, best_checkpoint
 
 __all__ = [
     "CARD_FILE", "CONFIG_FILE", "WEIGHTS_FILE", "Catalog", "CheckpointEntry", "CheckpointRef", "DataRef",
-    "DataUse", "DatasetEntry", "EvaluationEntry", "GcItem", "MIGRATIONS", "Problem", "ResolvedData",
+    "DataUse", "DatasetEntry", "EvaluationEntry", "GcItem", "MIGRATIONS", "Origin", "Problem", "ResolvedData",
     "SCHEMA_VERSION", "VerifyReport", "best_checkpoint", "checkpoint_id", "folder_checkpoint_id", "folder_digests",
-    "format_descendants", "format_lineage", "gc_apply", "gc_plan", "parse_checkpoint_ref", "parse_data_ref",
-    "remove", "render_model_card", "short_hash", "verify", "wilson_interval", "write_model_folder",
+    "format_descendants", "format_lineage", "gc_apply", "gc_plan", "origin_of", "parse_checkpoint_ref",
+    "parse_data_ref", "published_lineage", "record_origin", "remove", "render_model_card", "short_hash", "verify",
+    "wilson_interval", "write_model_folder",
 ]

@@ -73,14 +73,20 @@ def render_model_card(entry: CheckpointEntry, ancestors: Sequence[CheckpointEntr
 
     ``ancestors`` is the parent chain (parent first); ``datasets`` maps
     (name, version) to the rows of the datasets ``entry`` used.  ``info`` may
-    hold ``summary`` (a paragraph), ``tags`` (extra tags) and ``license``.
+    hold ``summary`` (a paragraph), ``tags`` (extra tags), ``license`` and
+    ``published``: the published lineage (``nsl.catalog.published_lineage``),
+    which then gives the data and ancestors, including those known only from
+    a pull.
     """
     info = dict(info or {})
+    published = list(info.get("published") or [])
     results = pooled_results(evaluations)
     tags = list(dict.fromkeys([*BASE_TAGS, *info.get("tags", ()), entry.shift]))
     out = [_front_matter(entry, results, tags, str(info.get("license", "apache-2.0")))]
     out.append(f"# {entry.name} @ step {entry.step}\n")
     origin = (f"fine-tuned from `{ancestors[0].ref}` (`{ancestors[0].short_id}`)" if ancestors
+              else f"fine-tuned from `{published[1]['name']}@{published[1]['step']}` (`{published[1]['id'][:12]}`)"
+              if len(published) > 1
               else f"fine-tuned from a removed checkpoint `{entry.parent[:12]}`" if entry.parent
               else "trained from scratch")
     out.append(
@@ -93,7 +99,13 @@ def render_model_card(entry: CheckpointEntry, ancestors: Sequence[CheckpointEntr
                f"- gradient step: {entry.step}\n- code version: `{entry.code_version}`\n- created: {entry.created}\n")
 
     out.append("## Training data\n")
-    if entry.data:
+    if published and published[0].get("data"):
+        out.append("| dataset | shift | episodes | tier | batch weight | content hash |\n|---|---|---|---|---|---|")
+        for d in published[0]["data"]:
+            out.append(f"| `{d['dataset']}@v{d['version']}` | {d.get('shift', '?')} | {d.get('episodes', '?')} | "
+                       f"{d.get('tier') or 'all'} | {d['weight']:g} | `{d.get('hash') or '?'}` |")
+        out.append("")
+    elif entry.data:
         out.append("| dataset | shift | episodes | tier | batch weight | content hash |\n|---|---|---|---|---|---|")
         for u in entry.data:
             d = datasets.get((u.dataset, u.version))
@@ -107,15 +119,27 @@ def render_model_card(entry: CheckpointEntry, ancestors: Sequence[CheckpointEntr
 
     out.append("## Lineage\n")
     out.append("Newest first; each checkpoint started from the weights of the one below it.\n")
-    for c in [entry, *ancestors]:
-        uses = DataUse.mix(c.data)
-        out.append(f"- `{c.ref}` (`{c.short_id}`), shift {c.shift}; data: {uses or 'none'}")
-    last = ancestors[-1] if ancestors else entry
-    if last.parent:
-        out.append(f"- `{last.parent[:12]}` (removed from the catalog)")
+    if published:
+        for n in published:
+            uses = ", ".join(f"{d['dataset']}@v{d['version']}{':' + str(d['tier']) if d.get('tier') else ''} "
+                             f"x{d['weight']:g}" for d in n.get("data", []))
+            out.append(f"- `{n['name']}@{n['step']}` (`{str(n['id'])[:12]}`), shift {n['shift']}; "
+                       f"data: {uses or 'none'}")
+        if published[-1].get("parent"):
+            out.append(f"- `{str(published[-1]['parent'])[:12]}` (not published)")
+    else:
+        for c in [entry, *ancestors]:
+            uses = DataUse.mix(c.data)
+            out.append(f"- `{c.ref}` (`{c.short_id}`), shift {c.shift}; data: {uses or 'none'}")
+        last = ancestors[-1] if ancestors else entry
+        if last.parent:
+            out.append(f"- `{last.parent[:12]}` (removed from the catalog)")
     out.append("")
 
     out.append("## Evaluation\n")
+    if not results and published and published[0].get("evaluations"):
+        results = published[0]["evaluations"]
+        out.append("Not evaluated in this workspace yet; these are the evaluations it was published with.\n")
     if results:
         out.append("Grasp success rate, pooled over evaluation runs, with 95% Wilson intervals.\n")
         out.append("| shift | objects | episodes | success | 95% interval |\n|---|---|---|---|---|")

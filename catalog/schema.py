@@ -119,7 +119,24 @@ def _run_script(conn: sqlite3.Connection, script: str) -> None:
             conn.execute(statement)
 
 
-MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _v1, 2: _v2}
+def _v3(conn: sqlite3.Connection) -> None:
+    """Origins: where a pulled dataset version or checkpoint came from, and what was published with it."""
+    _run_script(conn, """
+        CREATE TABLE origins (
+            seq       INTEGER PRIMARY KEY AUTOINCREMENT,
+            kind      TEXT NOT NULL,        -- 'dataset' or 'checkpoint'
+            entry     TEXT NOT NULL,        -- dataset NAME@vN, or checkpoint id
+            hash      TEXT NOT NULL,        -- the content hash (dataset) or id (checkpoint) that was pulled
+            url       TEXT NOT NULL,        -- the remote, without credentials
+            revision  TEXT NOT NULL,        -- Hub commit id, or the remote's version / checkpoint id
+            published TEXT NOT NULL,        -- JSON: the remote's manifest metadata (lineage, name, version)
+            created   TEXT NOT NULL
+        );
+        CREATE INDEX origins_entry ON origins (kind, entry);
+    """)
+
+
+MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _v1, 2: _v2, 3: _v3}
 SCHEMA_VERSION = max(MIGRATIONS)
 
 

@@ -8,6 +8,7 @@ Other folders import only this module (``from nsl.datasets import api``)::
     Collection, write_dataset, unfinished                # writing (resumable, append-only)
     make_sampler, Sampler                                # the training loader
     verify, tiers, list_datasets, export                 # maintenance
+    to_hf_dataset                                        # an Arrow-backed Hugging Face datasets.Dataset
 
 The learner's contract: ``make_sampler([(ref, weight), ...])`` returns an object
 with ``sample(batch_size, rng) -> dict`` (keys from ``nsl.keys``), ``__len__``
@@ -22,6 +23,7 @@ from typing import Any
 from . import layout
 from .collection import Collection, unfinished, write_dataset
 from .export import export as _export
+from .hf import to_hf_dataset
 from .loader import Sampler, TransitionSource, image_cache, make_sampler
 from .reader import DatasetVersion, DatasetView, open_version, open_view
 from .versions import STANDARD_TIERS, Ref, dataset_names, dataset_root, list_versions, parse_ref, resolve
@@ -32,7 +34,7 @@ __all__ = [
     "Collection", "DatasetVersion", "DatasetView", "EpisodeLike", "Ref", "STANDARD_TIERS", "Sampler",
     "TransitionSource", "dataset_names", "dataset_root", "episode_split", "export", "image_cache", "layout",
     "list_datasets", "list_versions", "make_sampler", "open_version", "open_view", "parse_ref", "resolve",
-    "tiers", "unfinished", "verify", "write_dataset",
+    "tiers", "to_hf_dataset", "unfinished", "verify", "write_dataset",
 ]
 
 
