@@ -15,8 +15,8 @@ echo "== 2. Scripted policies on every shift (test objects, 100 episodes each, 9
 $NSL eval --policy random,oracle:0.5,oracle --shift all --episodes 100 --workers $W --markdown | tee "$OUT/scripted.md"
 
 echo "== 3. Collect a base dataset and a small harsh-lighting target dataset (versioned LeRobot v3.0 datasets)"
-$NSL collect --shift base --episodes 600 --policy oracle:1.0 --dataset demo-base --workers $W --batch 4
-$NSL collect --shift harsh_lighting --episodes 100 --policy oracle:1.0 --dataset demo-harsh --workers $W --batch 4
+$NSL collect --shift base --episodes 600 --policy oracle:1.0 --data demo-base --workers $W --batch-size 4
+$NSL collect --shift harsh_lighting --episodes 100 --policy oracle:1.0 --data demo-harsh --workers $W --batch-size 4
 $NSL dataset tiers demo-harsh --sizes 25,50,100
 
 echo "== 4. Pre-train a Q-function offline on the base data (short, to show the command; the shipped base is next)"

@@ -19,7 +19,7 @@ def collected(text: str) -> dict[str, int]:
     for line in text.splitlines():
         if " collect " in line and not line.lstrip().startswith("#"):
             episodes = int(re.search(r"--episodes (\d+)", line).group(1))
-            out[re.search(r"--dataset (\S+)", line).group(1)] = episodes
+            out[re.search(r"--data (\S+)", line).group(1)] = episodes
     return out
 
 
