@@ -10,6 +10,7 @@ episodes publishes a new version that appends to the latest one.
 from __future__ import annotations
 
 import argparse
+import functools
 import shlex
 import sys
 import time
@@ -81,6 +82,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="episodes per Parquet file, also the resume granularity (default 100)")
     p.add_argument("--restart", action="store_true", help="discard an unfinished collection of this dataset")
     p.add_argument("--stop-after-files", type=int, default=0, help=argparse.SUPPRESS)  # tests: simulate a kill
+    from nsl.cluster import add_option
+
+    add_option(p)  # --cluster local|ray|auto|ray://HOST:PORT
     p.set_defaults(func=run)
 
 
@@ -110,9 +114,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"resuming {cfg.dataset}: {coll.stop - coll.start - len(missing)} of {coll.stop - coll.start} "
               "episodes already staged", file=sys.stderr)
     started = time.perf_counter()
-    _collect(coll, cfg, env_config, make_policy, missing, args.stop_after_files, collect_episodes)
+    from nsl.cluster import open_executor
+
+    with open_executor(args.cluster) as ex:  # local processes, or chunks as Ray tasks (same episodes)
+        _collect(coll, cfg, env_config, make_policy, missing, args.stop_after_files,
+                 functools.partial(collect_episodes, runner=ex.runner))
     version = coll.finish(created={
         "command": "nsl collect " + shlex.join(_argv(cfg)), "workers": cfg.workers, "batch": cfg.batch,
+        "cluster": ex.name,
         "collect_seconds": round(time.perf_counter() - started, 2), "config": asdict(cfg)})
     info = version.describe()
     on_version_created(version)

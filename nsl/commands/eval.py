@@ -27,6 +27,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=1000, help="scene seed (default 1000)")
     p.add_argument("--json", action="store_true", help='print {"results": {SHIFT: {...}}} (one object)')
     p.add_argument("--markdown", action="store_true", help="print a Markdown table")
+    from nsl.cluster import add_option
+
+    add_option(p)  # --cluster local|ray|auto|ray://HOST:PORT
     p.set_defaults(func=run)
 
 
@@ -46,7 +49,11 @@ def run(args: argparse.Namespace) -> int:
     if args.checkpoint:
         refs = [r if r.startswith("ckpt:") else f"ckpt:{r}" for r in refs]
     factories = {ref: policy_factory(ref, EnvConfig()) for ref in refs}  # validate all before any work
-    outcomes = {ref: evaluate_outcomes(make, shifts, config, progress=not args.json) for ref, make in factories.items()}
+    from nsl.cluster import open_executor
+
+    with open_executor(args.cluster) as ex:  # local processes, or scene chunks as Ray tasks (same outcomes)
+        outcomes = {ref: evaluate_outcomes(make, shifts, config, progress=not args.json, runner=ex.runner)
+                    for ref, make in factories.items()}
     table = {ref: {s: success_rate_from_outcomes(s, o) for s, o in res.items()} for ref, res in outcomes.items()}
     _store(table, config)
 
