@@ -13,8 +13,11 @@ processes.  Each chunk becomes a Ray task holding one CPU:
   the dataset as a local run would, so versions, resume and hashes are
   unchanged.  A worker whose simulator (``ENV_VERSION``) differs from the
   driver's refuses to run.
-* **Bounded memory.**  At most ``window`` chunks are in flight (default two per
-  cluster CPU); a chunk's episodes leave the object store once the driver has
+* **Few tasks.**  A task runs ``chunks_per_task`` consecutive chunks (default:
+  enough for 8 episodes), so Ray's per-task cost (about a millisecond of
+  driver and raylet time) stays small next to the simulation.
+* **Bounded memory.**  At most ``window`` tasks are in flight (default two per
+  cluster CPU); a task's episodes leave the object store once the driver has
   them.
 * **Lost nodes.**  A chunk whose worker or node dies is run again elsewhere by
   Ray (``max_retries``); a finished chunk lost with its node is rebuilt from
@@ -38,9 +41,10 @@ _WORKER: dict[str, Any] = {}  # in each Ray worker process: the setup of the col
 class RayChunkRunner:
     """A ``ChunkRunner`` for ``collect_episodes`` that runs chunks on the executor's Ray cluster."""
 
-    def __init__(self, executor, window: int | None = None):
+    def __init__(self, executor, window: int | None = None, chunks_per_task: int | None = None):
         self.executor = executor
-        self.window = window  # chunks in flight; None: two per cluster CPU (at least 4)
+        self.window = window  # tasks in flight; None: two per cluster CPU (at least 4)
+        self.chunks_per_task = chunks_per_task  # None: enough chunks for 8 episodes
         self.chunks_per_node: Counter[str] = Counter()  # node id -> chunks it returned (for tests and the bench)
 
     def __call__(self, config, make_policy, chunks: list[list[int]], seed: int, batch: int) -> Iterator[list]:
@@ -50,24 +54,25 @@ class RayChunkRunner:
         window = self.window or max(4, 2 * self.executor.cpus())
         setup = ray.put({"key": uuid.uuid4().hex, "config": config, "make_policy": make_policy, "batch": batch,
                          "env_version": ENV_VERSION})
-        task = _remote(ray, _run_chunk).options(num_cpus=1, max_retries=self.executor.max_retries,
-                                                retry_exceptions=False)
-        todo = deque(chunks)
+        task = _remote(ray, _run_chunks).options(num_cpus=1, max_retries=self.executor.max_retries,
+                                                 retry_exceptions=False)
+        per_task = self.chunks_per_task or max(1, -(-8 // batch))
+        todo = deque(chunks[k:k + per_task] for k in range(0, len(chunks), per_task))
         flight: deque = deque()
         try:
             while todo or flight:
                 while todo and len(flight) < window:
                     flight.append(task.remote(setup, todo.popleft(), seed))
-                node, episodes = get(ray, flight.popleft())
-                self.chunks_per_node[node] += 1
-                yield episodes
+                node, results = get(ray, flight.popleft())
+                self.chunks_per_node[node] += len(results)
+                yield from results
         finally:
             for ref in flight:  # the caller stopped early (interrupt, error): drop the chunks still running
                 ray.cancel(ref)
 
 
-def _run_chunk(setup: dict, indices: list[int], seed: int) -> tuple[str, list]:
-    """In a Ray worker: this chunk's episodes (and the node that ran them)."""
+def _run_chunks(setup: dict, chunks: list[list[int]], seed: int) -> tuple[str, list[list]]:
+    """In a Ray worker: each chunk's episodes (and the node that ran them)."""
     import ray
 
     from nsl.collectors import ENV_VERSION, run_episodes
@@ -80,8 +85,8 @@ def _run_chunk(setup: dict, indices: list[int], seed: int) -> tuple[str, list]:
             f"runs {setup['env_version']}; install the same nsl on every node")
     if _WORKER.get("key") != setup["key"]:
         _warm(setup)
-    episodes = list(run_episodes(_WORKER["envs"], _WORKER["policy"], indices, seed))
-    return ray.get_runtime_context().get_node_id(), episodes
+    results = [list(run_episodes(_WORKER["envs"], _WORKER["policy"], indices, seed)) for indices in chunks]
+    return ray.get_runtime_context().get_node_id(), results
 
 
 def _warm(setup: dict) -> None:
