@@ -4,11 +4,20 @@ from __future__ import annotations
 
 import functools
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import psutil
+import pytest
 
 from nsl.datasets import api
 from tests.conftest import run_cli
+
+ROOT = Path(__file__).resolve().parents[2]
 
 # 16 episodes in chunks of 2: two Ray tasks of 4 chunks, one per node
 COLLECT = ["collect", "--shift", "harsh_lighting", "--episodes", "16", "--policy", "oracle:0.5", "--batch", "2",
@@ -72,3 +81,35 @@ def test_a_node_lost_mid_collection_changes_nothing(ray_cluster):
     a = api.write_dataset("local", local, spec, 64, n, episodes_per_file=5)
     b = api.write_dataset("lost-node", episodes, spec, 64, n, episodes_per_file=5)
     assert b.hash == a.hash
+
+
+@pytest.mark.slow  # torch and a checkpoint load in the Ray workers of both nodes
+def test_checkpoint_policy_evaluates_the_same_on_two_nodes(ray_cluster, capsys):
+    argv = ["eval", "--checkpoint", "base", "--shift", "base,harsh_lighting", "--episodes", "16", "--batch", "4",
+            "--json"]
+    assert run_cli(*argv) == 0
+    local = json.loads(capsys.readouterr().out)["results"]
+    assert run_cli(*argv, "--cluster", "ray") == 0
+    assert json.loads(capsys.readouterr().out)["results"] == local
+
+
+@pytest.mark.slow  # a second driver process connects to the cluster
+def test_a_killed_driver_resumes_to_the_same_hash(ray_cluster):
+    cluster, _ = ray_cluster
+    argv = ["collect", "--shift", "base", "--episodes", "48", "--policy", "oracle:0.5", "--episodes-per-file", "4",
+            "--cluster", "ray"]
+    proc = subprocess.Popen([sys.executable, "-m", "nsl", *argv, "--dataset", "killed"], cwd=ROOT,
+                            env={**os.environ, "RAY_ADDRESS": cluster.address}, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    staged = api.dataset_root("killed") / ".staging/data/chunk-000/file-000.parquet"
+    try:
+        deadline = time.time() + 180
+        while not staged.exists() and proc.poll() is None and time.time() < deadline:
+            time.sleep(0.05)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert staged.exists() and api.list_versions("killed") == []
+    assert run_cli(*argv, "--dataset", "killed") == 0  # resumes, on the cluster this process is connected to
+    assert run_cli(*argv[:-2], "--dataset", "fresh") == 0  # locally, from scratch
+    assert api.open_version("killed").hash == api.open_version("fresh").hash

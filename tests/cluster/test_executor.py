@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import functools
-import os
+import re
 import sys
 
 import pytest
@@ -113,3 +113,37 @@ def test_units_run_as_ray_tasks_on_both_nodes_and_need_the_shared_workspace(ray_
         with pytest.raises(UnitFailed, match=r"unit train failed: NSL_HOME .* of the driver is not visible on node "
                                              r".*; mount the same shared folder"):
             ex.wait()
+
+
+def test_the_five_folders_take_a_runner_and_never_import_the_cluster_package():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    imports = re.compile(r"^\s*(from\s+nsl\.cluster|import\s+nsl\.cluster|from\s+nsl\s+import\s+.*\bcluster\b)",
+                         re.M)
+    offenders = [str(f.relative_to(root)) for folder in ("collectors", "datasets", "learners", "eval", "catalog")
+                 for f in (root / folder).rglob("*.py") if imports.search(f.read_text())]
+    assert offenders == []
+    import inspect
+
+    from nsl.collectors import collect_episodes
+    from nsl.eval import evaluate
+
+    assert "runner" in inspect.signature(collect_episodes).parameters
+    assert "runner" in inspect.signature(evaluate).parameters
+
+
+@pytest.mark.slow  # starts a Ray instance of its own and a local pool (~25 s on a busy 2-core machine)
+def test_bench_cluster_starts_its_own_ray_and_stops_it(capsys):
+    import json
+
+    import ray
+
+    assert not ray.is_initialized()
+    assert run_cli("bench", "cluster", "--json", "--episodes", "16", "--batch", "2") == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["same_episodes"] is True and out["episodes"] == 16 and out["cpus"] == 2
+    assert out["local_episodes_per_s"] > 0 and out["ray_episodes_per_s"] > 0
+    assert out["ray_vs_local"] == pytest.approx(out["ray_episodes_per_s"] / out["local_episodes_per_s"], rel=0.02)
+    assert 50_000 < out["bytes_per_episode"] < 1_000_000  # 8 frames of 64x64x3 images and the rest
+    assert not ray.is_initialized()  # the instance it started is shut down
