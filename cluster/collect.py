@@ -14,8 +14,9 @@ processes.  Each chunk becomes a Ray task holding one CPU:
   unchanged.  A worker whose simulator (``ENV_VERSION``) differs from the
   driver's refuses to run.
 * **Few tasks.**  A task runs ``chunks_per_task`` consecutive chunks (default:
-  enough for 8 episodes), so Ray's per-task cost (about a millisecond of
-  driver and raylet time) stays small next to the simulation.
+  enough for 8 episodes, fewer when that would leave under 4 tasks per CPU),
+  so Ray's per-task cost (about a millisecond of driver and raylet time) stays
+  small next to the simulation.
 * **Bounded memory.**  At most ``window`` tasks are in flight (default two per
   cluster CPU); a task's episodes leave the object store once the driver has
   them.
@@ -44,19 +45,21 @@ class RayChunkRunner:
     def __init__(self, executor, window: int | None = None, chunks_per_task: int | None = None):
         self.executor = executor
         self.window = window  # tasks in flight; None: two per cluster CPU (at least 4)
-        self.chunks_per_task = chunks_per_task  # None: enough chunks for 8 episodes
+        self.chunks_per_task = chunks_per_task  # None: enough chunks for 8 episodes (fewer in short runs)
         self.chunks_per_node: Counter[str] = Counter()  # node id -> chunks it returned (for tests and the bench)
 
     def __call__(self, config, make_policy, chunks: list[list[int]], seed: int, batch: int) -> Iterator[list]:
         from nsl.collectors import ENV_VERSION
 
         ray = self.executor.connect()
-        window = self.window or max(4, 2 * self.executor.cpus())
+        cpus = self.executor.cpus()
+        window = self.window or max(4, 2 * cpus)
         setup = ray.put({"key": uuid.uuid4().hex, "config": config, "make_policy": make_policy, "batch": batch,
                          "env_version": ENV_VERSION})
         task = _remote(ray, _run_chunks).options(num_cpus=1, max_retries=self.executor.max_retries,
                                                  retry_exceptions=False)
-        per_task = self.chunks_per_task or max(1, -(-8 // batch))
+        # about 8 episodes a task, but at least 4 tasks per CPU so that short runs spread and end together
+        per_task = self.chunks_per_task or max(1, min(-(-8 // batch), -(-len(chunks) // (4 * cpus))))
         todo = deque(chunks[k:k + per_task] for k in range(0, len(chunks), per_task))
         flight: deque = deque()
         try:

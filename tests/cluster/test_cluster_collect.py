@@ -19,7 +19,7 @@ from tests.conftest import run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 
-# 16 episodes in chunks of 2: two Ray tasks of 4 chunks, one per node
+# 16 episodes in chunks of 2: eight one-chunk Ray tasks over the two nodes
 COLLECT = ["collect", "--shift", "harsh_lighting", "--episodes", "16", "--policy", "oracle:0.5", "--batch", "2",
            "--episodes-per-file", "5", "--seed", "3"]
 EVAL = ["eval", "--policy", "oracle:0.5", "--shift", "base,checkerboard_backing", "--episodes", "16", "--batch", "2",
