@@ -166,7 +166,10 @@ class RayExecutor(Executor):
         import logging
 
         if self.address is None:
-            kwargs = {"include_dashboard": False, "logging_level": logging.WARNING, **self.init_kwargs}
+            # Ray runs workers at niceness 15 by default: on a busy machine they would lose the CPU to every other
+            # process, where local worker processes run at the caller's priority.
+            kwargs = {"include_dashboard": False, "logging_level": logging.WARNING,
+                      "_system_config": {"worker_niceness": 0}, **self.init_kwargs}
             ray.init(address="local", **kwargs)
         else:
             try:
