@@ -30,7 +30,10 @@ def test_collect_and_eval_on_two_nodes_match_local(ray_cluster, capsys):
     import ray
 
     assert run_cli(*COLLECT, "--dataset", "local") == 0
-    assert run_cli(*COLLECT, "--dataset", "on-ray", "--cluster", "ray") == 0
+    assert run_cli(*COLLECT, "--dataset", "on-ray", "--cluster", "ray", "--stop-after-files", "1") == 130  # Ctrl-C
+    assert api.list_versions("on-ray") == []
+    assert run_cli(*COLLECT, "--dataset", "on-ray", "--cluster", "ray") == 0  # resumes after the staged file
+    assert "5 of 16 episodes already staged" in capsys.readouterr().err
     local, remote = api.open_version("local"), api.open_version("on-ray")
     assert remote.hash == local.hash
     assert remote.manifest["created"]["cluster"] == "ray" and local.manifest["created"]["cluster"] == "local"
