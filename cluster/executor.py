@@ -243,13 +243,21 @@ def open_executor(value: str | None = None, **init_kwargs) -> Executor:
 
 
 def get(ray, ref):
-    """``ray.get`` that re-raises an nsl error from a task as itself (one line), not wrapped in a Ray error."""
+    """``ray.get`` that re-raises an nsl error from a task as itself (one line), not wrapped in a Ray error.
+
+    A task that failed for good for the cluster's reasons (its node lost more often than ``max_retries``)
+    becomes a one-line :class:`EnvironmentSetupError`; a bug in the task keeps its traceback.
+    """
     try:
         return ray.get(ref)
     except ray.exceptions.RayTaskError as e:
         if isinstance(e.cause, NslError):
             raise e.cause from None
         raise
+    except ray.exceptions.RayError as e:
+        first = str(e).strip().splitlines()[0] if str(e).strip() else ""
+        raise EnvironmentSetupError(f"the Ray cluster lost a task it could not run again ({type(e).__name__}: "
+                                    f"{first}); run the same command again to resume") from e
 
 
 _REMOTES: dict[Any, Any] = {}

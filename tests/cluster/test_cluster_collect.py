@@ -55,10 +55,53 @@ def test_collect_and_eval_on_two_nodes_match_local(ray_cluster, capsys):
     assert listening and listening <= {"127.0.0.1", "::ffff:127.0.0.1"}
 
 
-def test_a_node_lost_mid_collection_changes_nothing(ray_cluster):
+class _SlowOnNode:
+    """A policy factory: the oracle, slowed down on one node, where it touches ``flag`` at every step.
+
+    The flag shows that the node is in the middle of a chunk; the pause keeps it there.  Elsewhere the
+    policy waits for the flag before its first action, so the other node cannot finish every chunk first.
+    The actions are the oracle's, so the episodes are too.
+    """
+
+    def __init__(self, node_id: str, flag: str):
+        self.node_id, self.flag = node_id, flag
+
+    def __call__(self):
+        import ray
+
+        from nsl.collectors import scripted_policy
+
+        policy = scripted_policy("oracle:0.5")
+        return _Paced(policy, self.flag, ray.get_runtime_context().get_node_id() == self.node_id)
+
+
+class _Paced:
+    def __init__(self, policy, flag: str, slow: bool):
+        self.policy, self.flag, self.slow = policy, Path(flag), slow
+
+    def __getattr__(self, name):
+        return getattr(self.policy, name)
+
+    def __call__(self, *args, **kwargs):
+        if self.slow:
+            self.flag.touch()
+            time.sleep(0.1)
+        else:
+            deadline = time.time() + 60
+            while not self.flag.exists() and time.time() < deadline:
+                time.sleep(0.01)
+        return self.policy(*args, **kwargs)
+
+
+def test_a_node_lost_mid_chunk_changes_nothing(ray_cluster, tmp_path):
+    import threading
+
+    from ray import cloudpickle
+
     from nsl.cluster import RayExecutor
     from nsl.collectors import EnvConfig, collect_episodes, scripted_policy
 
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])  # Ray workers cannot import this test module
     cluster, worker = ray_cluster
     config = EnvConfig(shift="base")
     make_policy = functools.partial(scripted_policy, "oracle:0.5")
@@ -66,21 +109,30 @@ def test_a_node_lost_mid_collection_changes_nothing(ray_cluster):
     n = 24
     local = list(collect_episodes(config, make_policy, range(n), seed=5, batch=2))
 
+    flag = tmp_path / "worker-node-busy"
+    removed = threading.Event()
+
+    def kill_the_worker_node_mid_chunk():
+        deadline = time.time() + 120
+        while not flag.exists() and time.time() < deadline:
+            time.sleep(0.01)
+        cluster.remove_node(worker, allow_graceful=False)  # its raylet, object store and workers die
+        removed.set()
+
+    killer = threading.Thread(target=kill_the_worker_node_mid_chunk, daemon=True)
+    killer.start()
     executor = RayExecutor("ray")
     runner = executor.runner
-    runner.chunks_per_task = 1  # 12 tasks: the worker node is busy when it goes
-    episodes = []
-    stream = collect_episodes(config, make_policy, range(n), seed=5, batch=2, runner=runner)
-    for ep in stream:
-        episodes.append(ep)
-        if worker is not None and runner.chunks_per_node[worker.node_id] and len(episodes) >= 6:
-            cluster.remove_node(worker, allow_graceful=False)  # kill the node's raylet, store and workers
-            worker = None
-    assert worker is None, "the worker node never ran a chunk, so removing it tested nothing"
+    runner.chunks_per_task = 1  # 12 tasks of 2 episodes
+    episodes = list(collect_episodes(config, _SlowOnNode(worker.node_id, str(flag)), range(n), seed=5, batch=2,
+                                     runner=runner))
+    killer.join()
     executor.close()
 
+    assert flag.exists() and removed.is_set()
+    # the worker node was mid-chunk when it died and returned nothing: the head ran its chunk again
+    assert dict(runner.chunks_per_node) == {cluster.head_node.node_id: n // 2}
     assert [e.index for e in episodes] == list(range(n))
-    assert len(runner.chunks_per_node) == 2 and sum(runner.chunks_per_node.values()) == n // 2
     a = api.write_dataset("local", local, spec, 64, n, episodes_per_file=5)
     b = api.write_dataset("lost-node", episodes, spec, 64, n, episodes_per_file=5)
     assert b.hash == a.hash
