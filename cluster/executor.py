@@ -149,7 +149,7 @@ class RayExecutor(Executor):
         if self.address is None:
             os.environ.setdefault(LOOPBACK_ENV, "0")  # read when Ray is imported: listeners on 127.0.0.1
         self.ray = import_ray(spec)
-        self.init_kwargs = dict(init_kwargs or {})  # for an instance started here (num_cpus, object_store_memory)
+        self.init_kwargs = dict(init_kwargs or {})  # ray.init options for an instance started here (num_cpus, ...)
         self.max_retries = max_retries  # a chunk or unit lost with its node is run again up to this often
         self._started = False  # True once this executor called ray.init (so close() calls ray.shutdown)
         self._pending: dict[Any, str] = {}  # unit task ref -> key
@@ -173,7 +173,7 @@ class RayExecutor(Executor):
             ray.init(address="local", **kwargs)
         else:
             try:
-                ray.init(address=self.address, logging_level=logging.WARNING, **self.init_kwargs)
+                ray.init(address=self.address, logging_level=logging.WARNING)
             except ConnectionError as e:
                 raise EnvironmentSetupError(f"--cluster {self.name}: cannot reach a Ray cluster at {self.address} "
                                             f"({str(e).splitlines()[0]}); start one with `ray start --head` "
