@@ -31,6 +31,7 @@ bench: install
 	$(NSL) bench data --json
 	$(NSL) bench learner --json
 	$(NSL) bench eval --json
+	$(NSL) bench cluster --json
 
 clean:
 	rm -rf $(VENV) .nsl-demo

@@ -2,7 +2,8 @@
 
 Episodes come back in index order whatever the number of workers, and each is
 a pure function of ``(seed, index)`` (see :mod:`.rollout`), so a collection
-gives identical episodes for any worker count.
+gives identical episodes for any worker count.  A ``runner`` (a :data:`ChunkRunner`,
+e.g. ``nsl.cluster``'s Ray runner) runs the chunks elsewhere instead of local processes.
 """
 
 from __future__ import annotations
@@ -10,12 +11,15 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import sys
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 
 from .env import EnvConfig
 from .rollout import Episode, PolicyFactory, make_envs, run_episodes
 
 _WORKER: dict = {}
+
+ChunkRunner = Callable[[EnvConfig, PolicyFactory, list[list[int]], int, int], Iterable[list[Episode]]]
+"""``runner(config, make_policy, chunks, seed, batch)`` -> each chunk's episodes, chunk by chunk in order."""
 
 
 def _init_worker(config: EnvConfig, make_policy: PolicyFactory, batch: int, seed: int) -> None:
@@ -32,12 +36,13 @@ def _run_chunk(indices: list[int]) -> list[Episode]:
 
 
 def collect_episodes(config: EnvConfig, make_policy: PolicyFactory, indices: Iterable[int], seed: int,
-                     workers: int = 1, batch: int = 1) -> Iterator[Episode]:
+                     workers: int = 1, batch: int = 1, runner: ChunkRunner | None = None) -> Iterator[Episode]:
     """Yield episodes ``indices`` in order, run by ``workers`` processes.
 
     ``make_policy`` is called once in each worker (it must be picklable, e.g. a
     ``functools.partial``); ``batch`` environments per worker step in lock-step
-    so a learned policy evaluates them in one forward pass.
+    so a learned policy evaluates them in one forward pass.  With a ``runner``,
+    ``workers`` is ignored and the runner runs the chunks of ``batch`` episodes.
     """
     indices = list(indices)
     if workers < 1:
@@ -45,6 +50,10 @@ def collect_episodes(config: EnvConfig, make_policy: PolicyFactory, indices: Ite
 
         raise ConfigError(f"workers {workers} must be at least 1")
     chunks = [indices[k:k + batch] for k in range(0, len(indices), batch)]
+    if runner is not None:
+        for episodes in runner(config, make_policy, chunks, seed, batch):
+            yield from episodes
+        return
     if workers == 1:
         # In the caller's process: no thread limits (a trainer evaluating in-process keeps its threads).
         _WORKER.update(envs=make_envs(config, batch), policy=make_policy(), seed=seed)

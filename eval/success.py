@@ -33,22 +33,22 @@ class EvalConfig:
 
 
 def evaluate(make_policy: Callable, shifts: Sequence[ShiftSpec], config: EvalConfig, env_overrides: dict | None = None,
-             progress: bool = True) -> dict[str, SuccessRate]:
-    """Success rate of the policy built by ``make_policy`` on each shift."""
+             progress: bool = True, runner: Callable | None = None) -> dict[str, SuccessRate]:
+    """Success rate of the policy built by ``make_policy`` on each shift (``runner``: see ``collect_episodes``)."""
     results: dict[str, SuccessRate] = {}
     for spec in shifts:
-        episodes = run_eval_episodes(make_policy, spec, config, env_overrides, progress)
+        episodes = run_eval_episodes(make_policy, spec, config, env_overrides, progress, runner)
         results[spec.name] = SuccessRate(spec.name, len(episodes), sum(e.success for e in episodes))
     return results
 
 
 def run_eval_episodes(make_policy: Callable, shift: ShiftSpec, config: EvalConfig, env_overrides: dict | None = None,
-                      progress: bool = True) -> list[Episode]:
+                      progress: bool = True, runner: Callable | None = None) -> list[Episode]:
     env_config = EnvConfig(shift=shift.name, split=config.split, image_size=config.image_size, **(env_overrides or {}))
     out = []
     bar = tqdm(total=config.episodes, desc=f"eval {shift.name}", unit="ep", disable=not progress, leave=False)
     for ep in collect_episodes(env_config, make_policy, range(config.episodes), config.seed, config.workers,
-                               config.batch):
+                               config.batch, runner=runner):
         out.append(ep)
         bar.update(1)
         bar.set_postfix(success=f"{sum(e.success for e in out) / len(out):.2f}")
@@ -57,12 +57,13 @@ def run_eval_episodes(make_policy: Callable, shift: ShiftSpec, config: EvalConfi
 
 
 def evaluate_outcomes(make_policy: Callable, shifts: Sequence[ShiftSpec], config: EvalConfig,
-                      env_overrides: dict | None = None, progress: bool = True) -> dict[str, list[bool]]:
+                      env_overrides: dict | None = None, progress: bool = True,
+                      runner: Callable | None = None) -> dict[str, list[bool]]:
     """Per-episode success on each shift, in episode-index order (scene seed ``(seed, i)``).
 
     Two policies' outcomes from the same ``config.seed`` are paired: pass them
     to :func:`nsl.eval.compare_paired`.  :func:`success_rate_from_outcomes` gives the rate.
     """
     return {spec.name: [bool(e.success) for e in run_eval_episodes(make_policy, spec, config, env_overrides,
-                                                                     progress)]
+                                                                     progress, runner)]
             for spec in shifts}

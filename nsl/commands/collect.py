@@ -10,6 +10,7 @@ episodes publishes a new version that appends to the latest one.
 from __future__ import annotations
 
 import argparse
+import functools
 import shlex
 import sys
 import time
@@ -82,6 +83,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="episodes per Parquet file, also the resume granularity")
     p.add_argument("--restart", action="store_true", help="discard an unfinished collection of this dataset")
     p.add_argument("--stop-after-files", type=int, default=0, help=argparse.SUPPRESS)  # tests: simulate a kill
+    from nsl.cluster import add_option
+
+    add_option(p)  # --cluster local|ray|auto|ray://HOST:PORT
     p.set_defaults(func=run)
 
 
@@ -89,16 +93,17 @@ def run(args: argparse.Namespace) -> int:
     collect(shift=args.shift, episodes=args.episodes, policy=args.policy, data=args.data, workers=args.workers,
             seed=args.seed, batch_size=args.batch_size, split=args.split, image_size=args.image_size,
             episodes_per_file=args.episodes_per_file, epsilon=args.epsilon, restart=args.restart,
-            stop_after_files=args.stop_after_files)
+            stop_after_files=args.stop_after_files, cluster=args.cluster)
     return 0
 
 
 def collect(*, shift: str, episodes: int, policy: str, data: str, workers: int = 1, seed: int = 0,
             batch_size: int = 1, split: str = "train", image_size: int = 64, episodes_per_file: int = 100,
-            epsilon: float = 0.0, restart: bool = False, stop_after_files: int = 0):
+            epsilon: float = 0.0, restart: bool = False, stop_after_files: int = 0, cluster: str | None = None):
     """Collect ``episodes`` episodes into dataset ``data`` (resuming or appending); returns its DatasetVersion.
 
-    The keyword arguments are those of ``nsl collect``.  An interruption raises
+    The keyword arguments are those of ``nsl collect`` (``cluster`` None: ``$NSL_CLUSTER`` or local
+    processes).  An interruption raises
     KeyboardInterrupt with the finished files staged, so the same call resumes.
     """
     from nsl.collectors import EnvConfig, collect_episodes
@@ -125,9 +130,14 @@ def collect(*, shift: str, episodes: int, policy: str, data: str, workers: int =
         print(f"resuming {cfg.data}: {coll.stop - coll.start - len(missing)} of {coll.stop - coll.start} "
               "episodes already staged", file=sys.stderr)
     started = time.perf_counter()
-    _collect(coll, cfg, env_config, make_policy, missing, stop_after_files, collect_episodes)
+    from nsl.cluster import open_executor
+
+    with open_executor(cluster) as ex:  # local processes, or chunks as Ray tasks (same episodes)
+        _collect(coll, cfg, env_config, make_policy, missing, stop_after_files,
+                 functools.partial(collect_episodes, runner=ex.runner))
     version = coll.finish(created={
         "command": "nsl collect " + shlex.join(_argv(cfg)), "workers": cfg.workers, "batch_size": cfg.batch_size,
+        "cluster": ex.name,
         "collect_seconds": round(time.perf_counter() - started, 2), "config": asdict(cfg)})
     info = version.describe()
     on_version_created(version)

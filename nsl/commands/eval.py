@@ -30,6 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     out = p.add_mutually_exclusive_group()
     add_json(out, 'the results ({"results": {SHIFT: {...}}}, or per policy under "policies")')
     out.add_argument("--markdown", action="store_true", help="print a Markdown table")
+    from nsl.cluster import add_option
+
+    add_option(p)  # --cluster local|ray|auto|ray://HOST:PORT
     p.set_defaults(func=run)
 
 
@@ -39,7 +42,8 @@ def run(args: argparse.Namespace) -> int:
     if args.checkpoint:
         refs = [r if r.startswith("ckpt:") else f"ckpt:{r}" for r in refs]
     result = evaluate(refs, shift=args.shift, severity=args.severity, episodes=args.episodes, workers=args.workers,
-                      batch_size=args.batch_size, split=args.split, seed=args.seed, progress=not args.json)
+                      batch_size=args.batch_size, split=args.split, seed=args.seed, progress=not args.json,
+                      cluster=args.cluster)
     table, comparisons = result["table"], result["paired"]
     if args.json:
         per = {ref: {"results": {k: v.to_dict() for k, v in res.items()}} for ref, res in table.items()}
@@ -65,12 +69,13 @@ def run(args: argparse.Namespace) -> int:
 
 def evaluate(refs: list[str], *, shift: str = "base", severity: float | None = None, episodes: int = 100,
              workers: int = 1, batch_size: int = 8, split: str = "test", seed: int = 1000, progress: bool = True,
-             source: str | None = None) -> dict:
+             source: str | None = None, cluster: str | None = None) -> dict:
     """Evaluate policy references on shifts; checkpoint results go to the catalog.
 
     ``refs`` are policies (``random``, ``oracle[:NOISE]``, ``ckpt:...``); the
     other keyword arguments are those of ``nsl eval``, and ``source`` is
-    recorded with each catalogued evaluation (e.g. "continual").  Returns
+    recorded with each catalogued evaluation (e.g. "continual"); ``cluster``
+    runs the scenes on Ray (``--cluster``; None: ``$NSL_CLUSTER`` or local).  Returns
     ``{"config": EvalConfig, "outcomes": {ref: {shift: [bool]}}, "table": {ref:
     {shift: SuccessRate}}, "paired": {shift: PairedComparison}}`` (paired only
     for two refs).
@@ -89,7 +94,11 @@ def evaluate(refs: list[str], *, shift: str = "base", severity: float | None = N
     shifts = parse_shift_list(shift, severity)
     config = EvalConfig(episodes=episodes, split=split, seed=seed, workers=workers, batch=batch_size)
     factories = {ref: policy_factory(ref, EnvConfig()) for ref in refs}  # validate all before any work
-    outcomes = {ref: evaluate_outcomes(make, shifts, config, progress=progress) for ref, make in factories.items()}
+    from nsl.cluster import open_executor
+
+    with open_executor(cluster) as ex:  # local processes, or scene chunks as Ray tasks (same outcomes)
+        outcomes = {ref: evaluate_outcomes(make, shifts, config, progress=progress, runner=ex.runner)
+                    for ref, make in factories.items()}
     table = {ref: {s: success_rate_from_outcomes(s, o) for s, o in res.items()} for ref, res in outcomes.items()}
     _store(table, config, source)
     paired = {}
