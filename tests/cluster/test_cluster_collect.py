@@ -20,19 +20,19 @@ from tests.conftest import run_cli
 ROOT = Path(__file__).resolve().parents[2]
 
 # 16 episodes in chunks of 2: eight one-chunk Ray tasks over the two nodes
-COLLECT = ["collect", "--shift", "harsh_lighting", "--episodes", "16", "--policy", "oracle:0.5", "--batch", "2",
+COLLECT = ["collect", "--shift", "harsh_lighting", "--episodes", "16", "--policy", "oracle:0.5", "--batch-size", "2",
            "--episodes-per-file", "5", "--seed", "3"]
-EVAL = ["eval", "--policy", "oracle:0.5", "--shift", "base,checkerboard_backing", "--episodes", "16", "--batch", "2",
+EVAL = ["eval", "--policy", "oracle:0.5", "--shift", "base,checkerboard_backing", "--episodes", "16", "--batch-size", "2",
         "--json"]
 
 
 def test_collect_and_eval_on_two_nodes_match_local(ray_cluster, capsys):
     import ray
 
-    assert run_cli(*COLLECT, "--dataset", "local") == 0
-    assert run_cli(*COLLECT, "--dataset", "on-ray", "--cluster", "ray", "--stop-after-files", "1") == 130  # Ctrl-C
+    assert run_cli(*COLLECT, "--data", "local") == 0
+    assert run_cli(*COLLECT, "--data", "on-ray", "--cluster", "ray", "--stop-after-files", "1") == 130  # Ctrl-C
     assert api.list_versions("on-ray") == []
-    assert run_cli(*COLLECT, "--dataset", "on-ray", "--cluster", "ray") == 0  # resumes after the staged file
+    assert run_cli(*COLLECT, "--data", "on-ray", "--cluster", "ray") == 0  # resumes after the staged file
     assert "5 of 16 episodes already staged" in capsys.readouterr().err
     local, remote = api.open_version("local"), api.open_version("on-ray")
     assert remote.hash == local.hash
@@ -140,7 +140,7 @@ def test_a_node_lost_mid_chunk_changes_nothing(ray_cluster, tmp_path):
 
 @pytest.mark.slow  # torch and a checkpoint load in the Ray workers of both nodes
 def test_checkpoint_policy_evaluates_the_same_on_two_nodes(ray_cluster, capsys):
-    argv = ["eval", "--checkpoint", "base", "--shift", "base,harsh_lighting", "--episodes", "16", "--batch", "4",
+    argv = ["eval", "--checkpoint", "base", "--shift", "base,harsh_lighting", "--episodes", "16", "--batch-size", "4",
             "--json"]
     assert run_cli(*argv) == 0
     local = json.loads(capsys.readouterr().out)["results"]
@@ -153,7 +153,7 @@ def test_a_killed_driver_resumes_to_the_same_hash(ray_cluster):
     cluster, _ = ray_cluster
     argv = ["collect", "--shift", "base", "--episodes", "48", "--policy", "oracle:0.5", "--episodes-per-file", "4",
             "--cluster", "ray"]
-    proc = subprocess.Popen([sys.executable, "-m", "nsl", *argv, "--dataset", "killed"], cwd=ROOT,
+    proc = subprocess.Popen([sys.executable, "-m", "nsl", *argv, "--data", "killed"], cwd=ROOT,
                             env={**os.environ, "RAY_ADDRESS": cluster.address}, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     staged = api.dataset_root("killed") / ".staging/data/chunk-000/file-000.parquet"
@@ -165,6 +165,6 @@ def test_a_killed_driver_resumes_to_the_same_hash(ray_cluster):
         proc.send_signal(signal.SIGKILL)
         proc.wait()
     assert staged.exists() and api.list_versions("killed") == []
-    assert run_cli(*argv, "--dataset", "killed") == 0  # resumes, on the cluster this process is connected to
-    assert run_cli(*argv[:-2], "--dataset", "fresh") == 0  # locally, from scratch
+    assert run_cli(*argv, "--data", "killed") == 0  # resumes, on the cluster this process is connected to
+    assert run_cli(*argv[:-2], "--data", "fresh") == 0  # locally, from scratch
     assert api.open_version("killed").hash == api.open_version("fresh").hash

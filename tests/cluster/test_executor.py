@@ -13,7 +13,7 @@ from nsl.cluster import Executor, Unit, UnitFailed, open_executor, parse_cluster
 from nsl.errors import ConfigError, EnvironmentSetupError
 from tests.conftest import run_cli
 
-COLLECT = ["collect", "--shift", "base", "--episodes", "2", "--policy", "random", "--dataset", "d"]
+COLLECT = ["collect", "--shift", "base", "--episodes", "2", "--policy", "random", "--data", "d"]
 
 
 def setup_module(module) -> None:
@@ -140,7 +140,7 @@ def test_bench_cluster_starts_its_own_ray_and_stops_it(capsys):
     import ray
 
     assert not ray.is_initialized()
-    assert run_cli("bench", "cluster", "--json", "--episodes", "16", "--batch", "2") == 0
+    assert run_cli("bench", "cluster", "--json", "--episodes", "16", "--batch-size", "2") == 0
     out = json.loads(capsys.readouterr().out)
     assert out["same_episodes"] is True and out["episodes"] == 16 and out["cpus"] == 2
     assert out["local_episodes_per_s"] > 0 and out["ray_episodes_per_s"] > 0
