@@ -109,8 +109,8 @@ def test_without_a_shipped_base_ckpt_base_is_unknown(cat, monkeypatch, tmp_path)
 
 
 def test_training_again_under_a_new_name_adds_an_alias_and_shares_the_weights(capsys):
-    assert run_cli("collect", "--shift", "base", "--episodes", "4", "--policy", "oracle:0.5", "--dataset", "tiny",
-                   "--batch", "4") == 0
+    assert run_cli("collect", "--shift", "base", "--episodes", "4", "--policy", "oracle:0.5", "--data", "tiny",
+                   "--batch-size", "4") == 0
     train = ("train", "--data", "tiny", "--steps", "2", "--batch-size", "8", "--seed", "3")
     assert run_cli(*train, "--name", "first") == 0
     assert run_cli(*train, "--name", "second") == 0  # same data, seed and parent: the same weights
