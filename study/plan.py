@@ -219,7 +219,10 @@ def _shift(name: str, what: str) -> str:
 
     if not isinstance(name, str):
         raise ConfigError(f"plan {what} = {name!r} must be a shift name")
-    spec = parse_shift(name)  # UnknownReferenceError names the shift and the closest known ones
+    try:
+        spec = parse_shift(name)
+    except UnknownReferenceError as e:  # it names the shift and the closest known ones; add where it is
+        raise UnknownReferenceError(f"plan {what}: {e}") from None
     if what != "base_data.datasets.shift" and not spec.shifts:
         raise ConfigError(f"plan {what} = 'base': the base task is evaluated everywhere already; name a shift")
     return spec.name
