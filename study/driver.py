@@ -47,6 +47,15 @@ def prepare(plan_ref: str, name: str | None = None):
     return plan, name, units, unit_graph(units)
 
 
+def estimate_study(plan_ref: str, name: str | None = None):
+    """The estimated cost of the units not done yet (nothing runs, nothing is written)."""
+    from .estimate import estimate
+
+    _, _, units, graph = prepare(plan_ref, name)
+    done = [n for n in order(graph) if actions.is_done(units[n])]
+    return estimate([units[n] for n in order(graph)], done)
+
+
 def run_study(plan_ref: str, name: str | None = None, workers: int = 1, progress: bool = True) -> dict[str, Any]:
     """Run (or resume) a study; writes its report at the end.  Returns the final status record."""
     if workers < 1:

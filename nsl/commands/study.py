@@ -20,6 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="units run at once, each in its own process (default 1: one unit at a time, using every "
                         "core; results are reproducible for the same --workers)")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
+    r.add_argument("--estimate", action="store_true",
+                   help="check the plan and print the estimated time of the units left, then stop")
     r.set_defaults(func=_run)
     s = ss.add_parser("status", help="units done, running and left, with the time spent")
     s.add_argument("name")
@@ -32,8 +34,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from nsl.study import run_study, status_lines, study_dir
+    from nsl.study import estimate_study, run_study, status_lines, study_dir
 
+    if args.estimate:
+        print(f"{args.name or args.plan}: {estimate_study(args.plan, args.name)} on a quiet 2-core machine, "
+              f"--workers 1")
+        return 0
     status = run_study(args.plan, args.name, workers=args.workers, progress=not args.quiet)
     print("\n".join(status_lines(status)[:1]))
     print(f"report: {study_dir(status['study']) / 'report.md'}")
