@@ -151,9 +151,12 @@ def run_graph(graph: nx.DiGraph, status_path: Path, *, execute: Callable[[Unit, 
                 t0 = time.perf_counter()
                 try:
                     execute(unit, inner, progress)
-                except BaseException as e:
-                    status.set(name, "failed", time.perf_counter() - t0, str(e))
-                    raise
+                except Exception as e:
+                    msg = str(e) if isinstance(e, NslError) else f"{type(e).__name__}: {e}"
+                    status.set(name, "failed", time.perf_counter() - t0, msg)
+                    status.save("failed")
+                    raise UnitFailed(f"unit {name}: {msg}; fix it and run the same command again to resume "
+                                     "(--debug shows the traceback)") from e
                 status.set(name, "done", time.perf_counter() - t0)
                 done.add(name)
                 bar.update(1)
@@ -178,6 +181,8 @@ def run_graph(graph: nx.DiGraph, status_path: Path, *, execute: Callable[[Unit, 
             else:
                 status.set(name, "failed", time.perf_counter() - t0, error.splitlines()[0] if error else "failed")
                 failed.append(f"{name}: {error}")
+    except UnitFailed:
+        raise
     except BaseException:
         for proc, _ in running.values():
             proc.terminate()
