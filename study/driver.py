@@ -12,6 +12,7 @@ A study lives in ``$NSL_HOME/studies/NAME/``::
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +63,10 @@ def run_study(plan_ref: str, name: str | None = None, workers: int = 1, progress
         raise ConfigError(f"--workers {workers} must be at least 1")
     plan, name, units, graph = prepare(plan_ref, name)
     folder = study_dir(name)
+    running = read_status(folder / STATUS_FILE)
+    if running.get("state") == "running" and running.get("pid") != os.getpid() and pid_alive(running.get("pid")):
+        raise ConfigError(f"study {name!r} is being run by process {running['pid']}; wait for it, or stop it and "
+                          "run the same command again to resume")
     folder.mkdir(parents=True, exist_ok=True)
     workspace.atomic_write_json(folder / PLAN_FILE, plan.to_dict())
     workspace.atomic_write_json(folder / UNITS_FILE, {
