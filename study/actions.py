@@ -86,7 +86,7 @@ def base_sources(plan: Plan) -> list[BaseSource]:
             name = api.parse_ref(s["ref"]).name
             want = s["version_hash"]
             present = _versions_with_hash(name, want)
-            recipe = None
+            recipe = _recipe(recipes[name]) if name in recipes else None  # a unit, done when the data is there
             if not present:
                 if name not in recipes:
                     raise UnknownReferenceError(
@@ -106,10 +106,10 @@ def base_sources(plan: Plan) -> list[BaseSource]:
         return out
     total = sum(d.weight for d in plan.base_data.datasets)
     for d in plan.base_data.datasets:
-        present = [r for r in _versions_with_hash(d.name, None) if api.open_version(r).num_episodes == d.episodes]
+        present = [r for r in _versions_with_hash(d.name, None) if api.open_version(r).num_episodes >= d.episodes]
         if present:
             _check_provenance(present[-1], _recipe(d))
-        out.append(BaseSource(d.name, d.weight / total, None, d.episodes, None if present else _recipe(d)))
+        out.append(BaseSource(d.name, d.weight / total, None, d.episodes, _recipe(d)))
     return out
 
 
@@ -137,8 +137,8 @@ def is_done(unit: Unit) -> bool:
     if unit.kind == "collect":
         from nsl.datasets import api
 
-        refs = _versions_with_hash(p["dataset"], p.get("expect_hash"))
-        return any(api.open_version(r).num_episodes == p["episodes"] for r in refs)
+        refs = _versions_with_hash(p["dataset"], p.get("expect_hash"))  # tiers are views: a larger one will do
+        return any(api.open_version(r).num_episodes >= p["episodes"] for r in refs)
     if unit.kind == "train":
         return _checkpoint_at(p["checkpoint"], p["steps"]) is not None
     if unit.kind == "eval":
@@ -241,7 +241,7 @@ def _data_mix(p: Mapping[str, Any]) -> list[tuple[str, float]]:
         if not refs:
             raise UnknownReferenceError(f"base dataset {b['dataset']} ({b['hash'] or 'any version'}) is missing; "
                                         "run the study again to collect it")
-        mix.append((refs[-1], float(b["weight"])))
+        mix.append((refs[-1] if b["hash"] else f"{refs[-1]}:{b['episodes']}", float(b["weight"])))
     t = p["target"]
     mix.append((f"{t['dataset']}:{t['tier']}", float(t["weight"])))
     return mix

@@ -111,7 +111,8 @@ class _Builder:
         deps = [collect_unit, *self.base_deps]
         if init is not None and init != BASE_POLICY:
             deps.append(f"train:{init}")
-        mix = [{"dataset": b.dataset, "hash": b.hash, "weight": 0.5 * b.weight} for b in self.base] if base_mix else []
+        mix = [{"dataset": b.dataset, "hash": b.hash, "episodes": b.episodes, "weight": 0.5 * b.weight}
+               for b in self.base] if base_mix else []
         target = {"collect": collect_unit, "dataset": self.units[collect_unit].params["dataset"], "tier": tier,
                   "weight": 0.5 if base_mix else 1.0}
         return self._add(Unit(f"train:{tag}", "train", {
