@@ -16,12 +16,17 @@ from dataclasses import dataclass
 
 from .units import Unit
 
-# Measured 2026-11-29 (nsl environment v3, the shipped base; batch 64; CEM 64/6/2 targets).
+# Measured 2026-11-29 with scripts/study_unit_costs.py (one-shift cost plan, 100 steps, 50 evaluation episodes,
+# 100 episodes collected by ckpt:base; load average 1.2-3.8) and single commands at load ~1; nsl environment v3,
+# the shipped base, batch 64, CEM 64/6/2 targets.  Measured: 50 evaluation episodes 1.0-1.8 s per unit, 100
+# checkpoint-policy episodes 3.2 s, 200 scripted episodes 7.3 s, 100 training steps 5.8 s (new_head), 19-26 s
+# (ft, scratch: the first training unit also imports torch's compiler and decodes the datasets' images), 21 s
+# (pnn, ft_pnn).  The rates below are rounded down from these, so that a busier machine still fits.
 UNIT_OVERHEAD_S = 1.5  # per unit run in-process: catalog, policy loading, sampler set-up
 SCRIPTED_EPISODES_PER_S = 25.0  # oracle/random collection, 2 simulator processes
-CHECKPOINT_EPISODES_PER_S = 20.0  # CEM-policy collection (with epsilon), 2 processes, 8 envs each
-EVAL_EPISODES_PER_S = 20.0  # CEM-policy evaluation, 2 processes, 8 envs each
-STEPS_PER_S = {"ft": 15.0, "new_head": 15.0, "scratch": 15.0, "pnn": 8.0, "ft_pnn": 8.5}  # PNN: 1.8x an FT step
+CHECKPOINT_EPISODES_PER_S = 25.0  # CEM-policy collection (with epsilon), 2 processes, 8 envs each
+EVAL_EPISODES_PER_S = 35.0  # CEM-policy evaluation, 2 processes, 8 envs each
+STEPS_PER_S = {"ft": 15.0, "new_head": 15.0, "scratch": 15.0, "pnn": 5.0, "ft_pnn": 5.0}
 IMAGE_CACHE_FRAMES_PER_S = 8_000.0  # first use of a dataset version: decode its PNG frames once
 FRAMES_PER_EPISODE = 8
 
