@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from nsl.eval import CurveRow, PerformanceMatrix, Rate, choose_steps, continual_metrics, wilson_interval
+from nsl.eval import CurveRow, PerformanceMatrix, choose_steps, continual_metrics, wilson_interval
 
 from . import reference as ref
 from .plan import Plan

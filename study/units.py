@@ -173,7 +173,7 @@ class _Builder:
         return self.units
 
     def _continual(self) -> None:
-        s, p = self.plan.continual, self.plan
+        s = self.plan.continual
         tasks = ["base", *s.sequence]
         policy = BASE_POLICY
         for i, shift in enumerate(s.sequence, 1):
@@ -188,7 +188,6 @@ class _Builder:
                        steps=s.steps, seed=s.seed)
             self.evaluate(single, shift)
             policy = tag
-        del p
 
 
 def continual_tags(plan: Plan) -> list[str]:
