@@ -99,3 +99,20 @@ def test_render_states_the_epsilon_and_every_section():
     for heading in ("## Findings", "## Challenge table (Table 5.1)", "## Fine-tuning by data size (Table 5.2)",
                     "## The continual sequence (Table 5.3)", "## Method curves", "## Overfitting and early stopping"):
         assert heading in text
+
+
+def test_a_study_in_progress_reports_what_it_has():
+    rec = records()
+    rec["base_policy"] = dict.fromkeys(rec["base_policy"])
+    for row in rec["finetune"].values():
+        for part in row.values():
+            for k in part:
+                part[k] = [None]
+    rec["continual"]["cells"] = [[None] * 3 for _ in range(3)]
+    rec["continual"]["single"] = dict.fromkeys(rec["continual"]["single"])
+    rec["curves"] = {"ft": {"0": None}}
+    rec["early_stop"] = None
+    assert all(f.holds is None for f in findings(rec))
+    text = render(rec, None, {})
+    assert "(no continual results yet)" in text and "(no early-stopping curve yet)" in text
+    assert "| harsh lighting | ours | - | - | - | - |" in text
