@@ -118,7 +118,7 @@ def test_kill_9_then_rerun_gives_the_uninterrupted_numbers(mini_run, mini_plan, 
     n_units = len(json.loads((mini_run / "studies" / "mini" / "units.json").read_text())["units"])
     kill_after = random.Random().randint(2, n_units - 2)  # a random point: this many units done before the kill
     print(f"killing after {kill_after} units")
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, start_new_session=True, stdout=subprocess.DEVNULL,
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, process_group=0, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     status_file = home / "studies" / "mini" / "status.json"
     killed = False
