@@ -84,19 +84,21 @@ def base_sources(plan: Plan) -> list[BaseSource]:
         total = sum(float(s["weight"]) for s in sources)
         for s in sources:
             name = api.parse_ref(s["ref"]).name
-            want = s["version_hash"]
-            present = _versions_with_hash(name, want)
+            want = s["version_hash"] if plan.base_data.verify else None  # verify = false: any version will do
+            present = [r for r in _versions_with_hash(name, want)
+                       if api.open_version(r).num_episodes >= int(s["episodes"])]
             recipe = _recipe(recipes[name]) if name in recipes else None  # a unit, done when the data is there
             if not present:
                 if name not in recipes:
                     raise UnknownReferenceError(
-                        f"base data {s['ref']} ({want[:19]}...) of {plan.base} is not in $NSL_HOME and the plan has no "
+                        f"base data {s['ref']} ({s['version_hash'][:19]}...) of {plan.base} is not in $NSL_HOME and the "
+                        "plan has no "
                         f"recipe to collect it; add a [[base_data.datasets]] entry named {name!r} "
                         "(scripts/collect_base_data.sh has the commands) or copy the dataset into the workspace")
-                if _versions_with_hash(name, None):
+                if want is not None and _versions_with_hash(name, None):
                     raise CorruptDataError(
                         f"the workspace holds dataset {name!r} but no version with the hash {plan.base} was trained "
-                        f"on ({want[:19]}...); remove it (nsl dataset ...) or use another NSL_HOME")
+                        f"on ({want[:19]}...); remove it, use another NSL_HOME, or set base_data.verify = false")
                 r = recipes[name]
                 if r.episodes != int(s["episodes"]):
                     raise ConfigError(f"plan base_data.datasets {name!r} has episodes = {r.episodes}, but {plan.base} "

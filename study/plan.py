@@ -50,6 +50,7 @@ class BaseDataset:
 class BaseData:
     source: str = "checkpoint"  # "checkpoint": the base checkpoint's own pre-training data, hash-checked; "plan": datasets below
     datasets: tuple[BaseDataset, ...] = ()  # recipes (source "checkpoint": to collect a missing recorded dataset again)
+    verify: bool = True  # source "checkpoint": the data must have the hashes the checkpoint records
 
 
 @dataclass(frozen=True)
@@ -254,6 +255,8 @@ def validate(plan: Plan) -> None:
     bd = plan.base_data
     if bd.source not in BASE_DATA_SOURCES:
         raise ConfigError(f"plan base_data.source = {bd.source!r}; use 'checkpoint' (the base's own data) or 'plan'")
+    if not isinstance(bd.verify, bool):
+        raise ConfigError(f"plan base_data.verify = {bd.verify!r} must be true or false")
     if bd.source == "plan" and not bd.datasets:
         raise ConfigError("plan base_data.source = 'plan' lists no [[base_data.datasets]]; add at least one")
     for d in bd.datasets:
