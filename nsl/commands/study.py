@@ -1,0 +1,63 @@
+"""``nsl study run|status|report``: the Never Stop Learning study as one resumable command."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "study", help="run the whole study from a plan (resumable), show its progress, write its report",
+        description="A study is a TOML plan (shipped: tiny, small, full, paper) run as a graph of collection, "
+                    "training and evaluation units. Finished units are skipped, so running the same command "
+                    "again resumes a killed study. Files go to $NSL_HOME/studies/NAME/.")
+    ss = p.add_subparsers(dest="study_command", metavar="ACTION")
+    r = ss.add_parser("run", help="run (or resume) a study", description="Run every unit of PLAN not done yet, "
+                      "then write the report.")
+    r.add_argument("plan", help="a shipped plan (tiny, small, full, paper) or a path to a TOML plan")
+    r.add_argument("--name", default=None, help="study name (default: the plan's name)")
+    r.add_argument("--workers", type=int, default=1,
+                   help="units run at once, each in its own process (default 1: one unit at a time, using every "
+                        "core; results are reproducible for the same --workers)")
+    r.add_argument("--quiet", action="store_true", help="no progress bars")
+    r.add_argument("--estimate", action="store_true",
+                   help="check the plan and print the estimated time of the units left, then stop")
+    r.set_defaults(func=_run)
+    s = ss.add_parser("status", help="units done, running and left, with the time spent")
+    s.add_argument("name")
+    s.add_argument("--json", action="store_true", help="print the status record as JSON")
+    s.set_defaults(func=_status)
+    w = ss.add_parser("report", help="write report.md and PNG plots under $NSL_HOME/studies/NAME/")
+    w.add_argument("name")
+    w.set_defaults(func=_report)
+    p.set_defaults(func=lambda args: p.print_help() or 1)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from nsl.study import estimate_study, run_study, status_lines, study_dir
+
+    if args.estimate:
+        print(f"{args.name or args.plan}: {estimate_study(args.plan, args.name)} on a quiet 2-core machine, "
+              f"--workers 1")
+        return 0
+    status = run_study(args.plan, args.name, workers=args.workers, progress=not args.quiet)
+    print("\n".join(status_lines(status)[:1]))
+    print(f"report: {study_dir(status['study']) / 'report.md'}")
+    return 0
+
+
+def _status(args: argparse.Namespace) -> int:
+    import json
+
+    from nsl.study import status_lines, study_status
+
+    status = study_status(args.name)
+    print(json.dumps(status, indent=2, sort_keys=True) if args.json else "\n".join(status_lines(status)))
+    return 0
+
+
+def _report(args: argparse.Namespace) -> int:
+    from nsl.study import write_study_report
+
+    print(f"wrote {write_study_report(args.name)}")
+    return 0

@@ -1,0 +1,147 @@
+"""``nsl study run|status|report``: plan -> checks -> unit graph -> scheduler -> report.
+
+A study lives in ``$NSL_HOME/studies/NAME/``::
+
+    plan.json      the validated plan (a study's name is bound to one plan)
+    units.json     every unit: kind, dependencies, settings
+    status.json    the scheduler's journal: each unit's state and seconds
+    records.json   the raw numbers the report is computed from
+    report.md      tables, findings (a)-(e), and the PNG plots beside it
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from nsl import code_version, workspace
+from nsl.errors import ConfigError, UnknownReferenceError
+
+from . import actions
+from .plan import Plan, load_plan, parse_plan
+from .report import (RECORDS_FILE, REPORT_FILE, gather, plot_curves, plot_early_stop, plot_tiers, render)
+from .scheduler import STATUS_FILE, pid_alive, read_status, run_graph
+from .units import build_units, order, unit_graph
+
+PLAN_FILE = "plan.json"
+UNITS_FILE = "units.json"
+
+
+def study_dir(name: str) -> Path:
+    return workspace.home() / "studies" / name
+
+
+def prepare(plan_ref: str, name: str | None = None):
+    """Load and check everything (plan, workspace, base data) and build the graph; writes nothing."""
+    plan = load_plan(plan_ref)
+    name = name or plan.name
+    if not name.replace("-", "").replace("_", "").isalnum():
+        raise ConfigError(f"--name {name!r} must use letters, digits, '-' and '_'")
+    saved = study_dir(name) / PLAN_FILE
+    if saved.is_file() and json.loads(saved.read_text()) != json.loads(json.dumps(plan.to_dict())):
+        raise ConfigError(f"study {name!r} exists with a different plan ({saved}); run it with the same plan to "
+                          "resume, or choose another --name")
+    base = actions.base_sources(plan)
+    units = build_units(plan, name, base)
+    return plan, name, units, unit_graph(units)
+
+
+def estimate_study(plan_ref: str, name: str | None = None):
+    """The estimated cost of the units not done yet (nothing runs, nothing is written)."""
+    from .estimate import estimate
+
+    _, _, units, graph = prepare(plan_ref, name)
+    done = [n for n in order(graph) if actions.is_done(units[n])]
+    return estimate([units[n] for n in order(graph)], done)
+
+
+def run_study(plan_ref: str, name: str | None = None, workers: int = 1, progress: bool = True) -> dict[str, Any]:
+    """Run (or resume) a study; writes its report at the end.  Returns the final status record."""
+    if workers < 1:
+        raise ConfigError(f"--workers {workers} must be at least 1")
+    plan, name, units, graph = prepare(plan_ref, name)
+    folder = study_dir(name)
+    running = read_status(folder / STATUS_FILE)
+    if running.get("state") == "running" and running.get("pid") != os.getpid() and pid_alive(running.get("pid")):
+        raise ConfigError(f"study {name!r} is being run by process {running['pid']}; wait for it, or stop it and "
+                          "run the same command again to resume")
+    folder.mkdir(parents=True, exist_ok=True)
+    workspace.atomic_write_json(folder / PLAN_FILE, plan.to_dict())
+    workspace.atomic_write_json(folder / UNITS_FILE, {
+        "units": [{"name": n, "kind": units[n].kind, "deps": list(units[n].deps), "params": dict(units[n].params)}
+                  for n in order(graph)], "code_version": code_version()})
+    status = run_graph(graph, folder / STATUS_FILE, execute=actions.run_unit, is_done=actions.is_done,
+                       workers=workers, progress=progress,
+                       meta={"study": name, "plan": plan.source, "workers": workers, "code_version": code_version()})
+    write_study_report(name)
+    return status
+
+
+def _load(name: str) -> Plan:
+    path = study_dir(name) / PLAN_FILE
+    if not path.is_file():
+        known = sorted(p.name for p in (workspace.home() / "studies").glob("*") if (p / PLAN_FILE).is_file())
+        raise UnknownReferenceError(f"no study named {name!r} in {workspace.home()}; "
+                                    + (f"known: {', '.join(known)}" if known else "start one with `nsl study run small`"))
+    return parse_plan(json.loads(path.read_text()), source=str(path), default_name=name)
+
+
+def study_status(name: str) -> dict[str, Any]:
+    """The status record, with 'running' units of a dead scheduler shown as 'interrupted'."""
+    _load(name)
+    status = read_status(study_dir(name) / STATUS_FILE)
+    if not status:
+        return {"study": name, "state": "not started", "units": {}}
+    alive = pid_alive(status.get("pid"))
+    if status.get("state") == "running" and not alive:
+        status["state"] = "interrupted"
+    for u in status.get("units", {}).values():
+        if u["state"] == "running" and not alive:
+            u["state"] = "interrupted"
+    return status
+
+
+def status_lines(status: dict[str, Any]) -> list[str]:
+    units = status.get("units", {})
+    by: dict[str, list[str]] = {}
+    for n, u in units.items():
+        by.setdefault(u["state"], []).append(n)
+    spent = sum(u.get("seconds") or 0 for u in units.values())
+    lines = [f"study {status.get('study')}: {status.get('state')}; "
+             + ", ".join(f"{len(by.get(s, []))} {s}" for s in ("done", "running", "interrupted", "failed", "left")
+                         if by.get(s) or s in ("done", "left"))
+             + f"; {spent / 60:.1f} minutes spent in units"]
+    for state in ("running", "interrupted", "failed", "left", "done"):
+        for n in by.get(state, []):
+            u = units[n]
+            secs = "" if u.get("seconds") is None else f"{u['seconds']:.1f}s"
+            err = f"  {u['error']}" if u.get("error") else ""
+            lines.append(f"  {state:<11} {secs:>8}  {n}{err}")
+    return lines
+
+
+def _read_curve(checkpoint: str):
+    from nsl.eval import CURVE_FILE, read_curve
+
+    path = workspace.runs_dir() / checkpoint / CURVE_FILE
+    return read_curve(path) if path.is_file() else None
+
+
+def write_study_report(name: str) -> Path:
+    """Write records.json, the plots and report.md under the study's folder; returns report.md's path."""
+    plan = _load(name)
+    folder = study_dir(name)
+    records = gather(plan, name, actions.evaluation, _read_curve)
+    workspace.atomic_write_json(folder / RECORDS_FILE, records)
+    figures = {}
+    if any(any(c is not None for v in row["tiers"].values() for c in v) for row in records["finetune"].values()):
+        figures["tiers"] = plot_tiers(records, folder / "tiers.png").name
+    if records.get("curves") and any(r for by in records["curves"].values() for r in by.values()):
+        figures["curves"] = plot_curves(records, folder / "curves.png").name
+    if records.get("early_stop"):
+        figures["early_stop"] = plot_early_stop(records, folder / "early_stop.png").name
+    text = render(records, read_status(folder / STATUS_FILE), figures)
+    workspace.atomic_write_bytes(folder / REPORT_FILE, (text + "\n").encode())
+    return folder / REPORT_FILE

@@ -1,0 +1,78 @@
+"""What a study will cost on this machine, from its unit graph and measured unit costs.
+
+The figures below were measured on the project's 2-core machine with
+``scripts/study_unit_costs.py`` (one unit at a time, ``--workers 1``, both
+cores per unit) and with single ``nsl`` commands when the machine was quiet
+(load average about 1); a busy machine is slower.  A unit's cost is a fixed
+overhead plus its work: collected or evaluated episodes, and gradient steps by
+method (a progressive network runs two columns with lateral connections).
+Units that already have their output cost nothing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+from .units import Unit
+
+# Measured 2026-11-29 with scripts/study_unit_costs.py (one-shift cost plan, 100 steps, 50 evaluation episodes,
+# 100 episodes collected by ckpt:base; load average 1.2-3.8) and single commands at load ~1; nsl environment v3,
+# the shipped base, batch 64, CEM 64/6/2 targets.  Measured: 50 evaluation episodes 1.0-1.8 s per unit, 100
+# checkpoint-policy episodes 3.2 s, 200 scripted episodes 7.3 s, 100 training steps 5.8 s (new_head), 19-26 s
+# (ft, scratch: the first training unit also imports torch's compiler and decodes the datasets' images), 21 s
+# (pnn, ft_pnn).  The rates below are rounded down from these, so that a busier machine still fits.
+UNIT_OVERHEAD_S = 1.5  # per unit run in-process: catalog, policy loading, sampler set-up
+SCRIPTED_EPISODES_PER_S = 25.0  # oracle/random collection, 2 simulator processes
+CHECKPOINT_EPISODES_PER_S = 25.0  # CEM-policy collection (with epsilon), 2 processes, 8 envs each
+EVAL_EPISODES_PER_S = 35.0  # CEM-policy evaluation, 2 processes, 8 envs each
+STEPS_PER_S = {"ft": 15.0, "new_head": 15.0, "scratch": 15.0, "pnn": 5.0, "ft_pnn": 5.0}
+IMAGE_CACHE_FRAMES_PER_S = 8_000.0  # first use of a dataset version: decode its PNG frames once
+FRAMES_PER_EPISODE = 8
+
+
+@dataclass(frozen=True)
+class Estimate:
+    seconds: float
+    by_kind: Mapping[str, float]
+    units: int
+
+    def __str__(self) -> str:
+        parts = ", ".join(f"{k} {v / 60:.0f}" for k, v in sorted(self.by_kind.items()))
+        return f"about {self.seconds / 60:.0f} minutes for {self.units} units ({parts} minutes)"
+
+
+def unit_seconds(unit: Unit) -> float:
+    """The estimated seconds of one unit (see the module's figures)."""
+    p = unit.params
+    if unit.kind == "collect":
+        rate = SCRIPTED_EPISODES_PER_S if not str(p["policy_ref"]).startswith("ckpt:") else CHECKPOINT_EPISODES_PER_S
+        return UNIT_OVERHEAD_S + p["episodes"] / rate
+    if unit.kind == "eval":
+        return UNIT_OVERHEAD_S + p["episodes"] / EVAL_EPISODES_PER_S
+    if unit.kind == "train":
+        seconds = UNIT_OVERHEAD_S + p["steps"] / STEPS_PER_S.get(p["method"], min(STEPS_PER_S.values()))
+        m = p.get("monitor")
+        if m:
+            points = p["steps"] // m["every"] + 1
+            seconds += points * (m["episodes"] + m["base_episodes"]) / EVAL_EPISODES_PER_S
+        return seconds
+    return UNIT_OVERHEAD_S
+
+
+def estimate(units: Iterable[Unit], done: Iterable[str] = ()) -> Estimate:
+    """Seconds for the units not in ``done``, in total and by kind."""
+    skip = set(done)
+    by_kind: dict[str, float] = {}
+    n = 0
+    cached: set[str] = set()
+    for u in units:
+        if u.name in skip:
+            continue
+        n += 1
+        s = unit_seconds(u)
+        if u.kind == "collect" and u.params["dataset"] not in cached:
+            cached.add(u.params["dataset"])
+            s += u.params["episodes"] * FRAMES_PER_EPISODE / IMAGE_CACHE_FRAMES_PER_S
+        by_kind[u.kind] = by_kind.get(u.kind, 0.0) + s
+    return Estimate(sum(by_kind.values()), by_kind, n)

@@ -1,0 +1,328 @@
+"""A study plan: the TOML file that names every experiment of the study, parsed and checked up front.
+
+A plan is plain data (frozen dataclasses).  :func:`load_plan` reads a TOML
+file or a shipped plan name (``tiny``, ``small``, ``full``, ``paper``) and
+checks everything that needs no workspace: known shifts, methods and
+criteria, tiers within the collection size, positive counts.  What needs the
+workspace (the base checkpoint and its data) is checked when the unit graph is
+built (:mod:`nsl.study.units`), still before any unit runs.  Every problem is
+one ``nsl.errors`` exception, raised before any work starts.
+
+Sections (see ``study/plans/small.toml`` for a commented example)::
+
+    name, base, shifts                 the study's name, base checkpoint, challenge shifts
+    [base_data]                        base-task data: the checkpoint's own (hash-checked) or listed here
+    [collect]                          target data: episodes per shift, exploration epsilon, seed
+    [eval]                             evaluation episodes and scene seed (every table)
+    [finetune]                         Table 5.2: tiers, steps, seeds, baselines at the top tier
+    [continual]                        Table 5.3: the sequence, episodes and steps per stage
+    [curves]                           Figs. 5.4/5.9: methods on one shift, success over steps, seeds
+    [early_stop]                       Fig. 5.7: one shift trained past its best point; criteria
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import asdict, dataclass, field, fields
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from nsl.errors import ConfigError, UnknownReferenceError
+
+SHIPPED = ("tiny", "small", "full", "paper")
+BASE_DATA_SOURCES = ("checkpoint", "plan")
+
+
+@dataclass(frozen=True)
+class BaseDataset:
+    """One base-task dataset and the recipe that collects it (``nsl collect`` arguments)."""
+
+    name: str  # dataset name in the workspace
+    policy: str  # collecting policy: random, oracle[:NOISE]
+    seed: int  # collection seed (episode i is a pure function of (seed, i))
+    episodes: int  # episodes the dataset holds
+    shift: str = "base"
+    weight: float = 1.0  # share within the base half of each batch (source "plan"; "checkpoint" uses the recorded weights)
+
+
+@dataclass(frozen=True)
+class BaseData:
+    source: str = "checkpoint"  # "checkpoint": the base checkpoint's own pre-training data, hash-checked; "plan": datasets below
+    datasets: tuple[BaseDataset, ...] = ()  # recipes (source "checkpoint": to collect a missing recorded dataset again)
+    verify: bool = True  # source "checkpoint": the data must have the hashes the checkpoint records
+
+
+@dataclass(frozen=True)
+class Collect:
+    episodes: int = 800  # target episodes the base policy collects per shift; tiers are its first-K views
+    epsilon: float = 0.1  # probability of a random action per step while collecting (exploration)
+    seed: int = 5  # collection seed of every target collection
+    batch: int = 8  # environments per worker in lock-step (does not change the data)
+
+
+@dataclass(frozen=True)
+class Eval:
+    episodes: int = 50  # test-object episodes per (checkpoint, task); every table uses these
+    seed: int = 2000  # scene seed: all evaluations are paired on the same scenes
+
+
+@dataclass(frozen=True)
+class Finetune:
+    tiers: tuple[int, ...] = (25, 50, 100, 200, 400, 800)  # target episodes, nested first-K views
+    steps: int = 1000  # gradient steps per fine-tuning run
+    seeds: tuple[int, ...] = (0,)  # training seeds; a cell pools its seeds' episodes
+    baselines: tuple[str, ...] = ("scratch", "new_head")  # methods trained at the top tier for comparison
+
+
+@dataclass(frozen=True)
+class Continual:
+    sequence: tuple[str, ...] = ("harsh_lighting", "transparent_objects", "checkerboard_backing", "extend_gripper",
+                                 "offset_gripper")
+    episodes: int = 800  # episodes each stage's policy collects in its shift
+    steps: int = 1000  # gradient steps per stage
+    seed: int = 0  # training seed
+
+
+@dataclass(frozen=True)
+class Curves:
+    shift: str = "transparent_objects"
+    episodes: int = 75  # target episodes (a tier of the shift's collection)
+    methods: tuple[str, ...] = ("ft", "pnn", "ft_pnn", "scratch")
+    steps: int = 1000
+    every: int = 250  # gradient steps between evaluations on the curve
+    eval_episodes: int = 30  # episodes per point, on the target shift and on the base task
+    seeds: tuple[int, ...] = (0, 1, 2)
+
+
+@dataclass(frozen=True)
+class EarlyStop:
+    shift: str = "offset_gripper"
+    episodes: int = 400  # target episodes (a tier of the shift's collection); holdout is taken from them
+    steps: int = 3000  # far past the best point
+    every: int = 250
+    eval_episodes: int = 30  # episodes per point, target and base
+    criteria: tuple[str, ...] = ("eval", "softopc", "auc", "td")
+    patience: int = 4  # evaluations without improvement before a criterion stops (replayed on the full curve)
+    holdout: float = 0.2  # fraction of the target episodes held out for the offline criteria
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Plan:
+    name: str  # default study name (folder $NSL_HOME/studies/NAME)
+    base: str = "ckpt:base"  # the base checkpoint
+    shifts: tuple[str, ...] = ("harsh_lighting", "transparent_objects", "checkerboard_backing", "extend_gripper",
+                               "offset_gripper")  # the challenge shifts (Tables 5.1 and 5.2)
+    checkpoint_every: int = 500  # a killed training resumes from its last checkpoint
+    base_data: BaseData = field(default_factory=BaseData)
+    collect: Collect = field(default_factory=Collect)
+    eval: Eval = field(default_factory=Eval)
+    finetune: Finetune = field(default_factory=Finetune)
+    continual: Continual | None = field(default_factory=Continual)
+    curves: Curves | None = field(default_factory=Curves)
+    early_stop: EarlyStop | None = field(default_factory=EarlyStop)
+    source: str = ""  # where the plan was read from (not part of its identity)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d.pop("source")
+        return d
+
+
+SECTIONS = {"base_data": BaseData, "collect": Collect, "eval": Eval, "finetune": Finetune, "continual": Continual,
+            "curves": Curves, "early_stop": EarlyStop}
+
+
+def _build(cls: type, d: Any, where: str):
+    if not isinstance(d, dict):
+        raise ConfigError(f"plan [{where}] must be a table of settings; got {d!r}")
+    known = {f.name: f for f in fields(cls)}
+    unknown = sorted(set(d) - set(known))
+    if unknown:
+        raise ConfigError(f"plan [{where}] has unknown setting(s) {unknown}; known: {sorted(known)}")
+    out = {}
+    for k, v in d.items():
+        if k == "datasets" and cls is BaseData:
+            if not isinstance(v, list):
+                raise ConfigError(f"plan [{where}] datasets must be an array of tables ([[base_data.datasets]])")
+            v = tuple(_build(BaseDataset, x, f"{where}.datasets") for x in v)
+        elif isinstance(v, list):
+            v = tuple(v)
+        out[k] = v
+    try:
+        return cls(**out)
+    except TypeError as e:  # a required field is missing
+        raise ConfigError(f"plan [{where}]: {e}; see study/plans/small.toml for a complete plan") from None
+
+
+def parse_plan(data: dict[str, Any], source: str = "", default_name: str = "study") -> Plan:
+    """A :class:`Plan` from parsed TOML, validated (raises ConfigError / UnknownReferenceError)."""
+    top = {k: v for k, v in data.items() if k not in SECTIONS}
+    sections = {}
+    for key, cls in SECTIONS.items():
+        if key not in data:
+            continue
+        if data[key] in (False, None) and key in ("continual", "curves", "early_stop"):
+            sections[key] = None  # `continual = false` switches an experiment off
+            continue
+        sections[key] = _build(cls, data[key], key)
+    top.setdefault("name", default_name)
+    plan = _build(Plan, {**top}, "plan")
+    plan = Plan(**{**{f.name: getattr(plan, f.name) for f in fields(Plan)}, **sections, "source": source})
+    validate(plan)
+    return plan
+
+
+def load_plan(ref: str) -> Plan:
+    """A shipped plan by name (``tiny``, ``small``, ``full``, ``paper``) or a TOML file path."""
+    path = Path(ref)
+    if ref in SHIPPED and not path.is_file():
+        text = resources.files("nsl.study").joinpath("plans", f"{ref}.toml").read_text()
+        source, default_name = f"shipped plan {ref!r}", ref
+    elif path.is_file():
+        text, source, default_name = path.read_text(), str(path), path.stem
+    else:
+        raise UnknownReferenceError(f"plan {ref!r} is neither a file nor a shipped plan; use one of "
+                                    f"{', '.join(SHIPPED)} or a path to a TOML plan")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"plan {source} is not valid TOML: {e}") from None
+    return parse_plan(data, source=source, default_name=default_name)
+
+
+def plan_header(ref: str) -> str:
+    """The comment lines at the top of a shipped plan (its description and cost estimate)."""
+    text = resources.files("nsl.study").joinpath("plans", f"{ref}.toml").read_text()
+    lines = []
+    for line in text.splitlines():
+        if not line.startswith("#"):
+            break
+        lines.append(line.lstrip("# ").rstrip())
+    return "\n".join(lines)
+
+
+# --- validation -------------------------------------------------------------------------------------------------------
+
+def _positive(value: Any, what: str) -> None:
+    if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+        raise ConfigError(f"plan {what} = {value!r} must be a whole number of at least 1")
+
+
+def _seeds(values: tuple, what: str) -> None:
+    if not values or any(not isinstance(s, int) or s < 0 for s in values) or len(set(values)) != len(values):
+        raise ConfigError(f"plan {what} = {list(values)!r} must be a non-empty list of distinct seeds >= 0")
+
+
+def _shift(name: str, what: str) -> str:
+    from nsl.collectors import parse_shift
+
+    if not isinstance(name, str):
+        raise ConfigError(f"plan {what} = {name!r} must be a shift name")
+    try:
+        spec = parse_shift(name)
+    except UnknownReferenceError as e:  # it names the shift and the closest known ones; add where it is
+        raise UnknownReferenceError(f"plan {what}: {e}") from None
+    if what != "base_data.datasets.shift" and not spec.shifts:
+        raise ConfigError(f"plan {what} = 'base': the base task is evaluated everywhere already; name a shift")
+    return spec.name
+
+
+def _method(name: str, what: str) -> None:
+    from nsl.errors import unknown
+    from nsl.learners import METHODS
+
+    if name not in METHODS:
+        raise unknown("method", name, METHODS, f"(plan {what})")
+
+
+def validate(plan: Plan) -> None:
+    """Every check that needs no workspace; raises one ConfigError/UnknownReferenceError."""
+    from nsl.errors import unknown
+    from nsl.eval import CRITERIA
+
+    if not isinstance(plan.name, str) or not plan.name.replace("-", "").replace("_", "").isalnum():
+        raise ConfigError(f"plan name {plan.name!r} must use letters, digits, '-' and '_' (it names datasets and runs)")
+    if not str(plan.base).startswith("ckpt:"):
+        raise ConfigError(f"plan base = {plan.base!r} must be a checkpoint reference such as 'ckpt:base'")
+    if not plan.shifts:
+        raise ConfigError("plan shifts is empty; name at least one challenge shift, e.g. ['harsh_lighting']")
+    names = [_shift(s, "shifts") for s in plan.shifts]
+    if len(set(names)) != len(names):
+        raise ConfigError(f"plan shifts {list(plan.shifts)} repeat a shift")
+    _positive(plan.checkpoint_every, "checkpoint_every")
+    bd = plan.base_data
+    if bd.source not in BASE_DATA_SOURCES:
+        raise ConfigError(f"plan base_data.source = {bd.source!r}; use 'checkpoint' (the base's own data) or 'plan'")
+    if not isinstance(bd.verify, bool):
+        raise ConfigError(f"plan base_data.verify = {bd.verify!r} must be true or false")
+    if bd.source == "plan" and not bd.datasets:
+        raise ConfigError("plan base_data.source = 'plan' lists no [[base_data.datasets]]; add at least one")
+    for d in bd.datasets:
+        _positive(d.episodes, f"base_data.datasets {d.name!r} episodes")
+        _shift(d.shift, "base_data.datasets.shift")
+        if not isinstance(d.seed, int) or d.seed < 0:
+            raise ConfigError(f"plan base_data.datasets {d.name!r} seed = {d.seed!r} must be >= 0")
+        if not d.weight > 0:
+            raise ConfigError(f"plan base_data.datasets {d.name!r} weight = {d.weight!r} must be positive")
+        if d.policy.startswith("ckpt:"):
+            raise ConfigError(f"plan base_data.datasets {d.name!r}: policy {d.policy!r} must be scripted "
+                              "(random or oracle[:NOISE]); base data does not depend on a checkpoint")
+    if len({d.name for d in bd.datasets}) != len(bd.datasets):
+        raise ConfigError("plan [[base_data.datasets]] repeat a dataset name")
+    c = plan.collect
+    _positive(c.episodes, "collect.episodes")
+    _positive(c.batch, "collect.batch")
+    if not 0.0 <= c.epsilon <= 1.0:
+        raise ConfigError(f"plan collect.epsilon = {c.epsilon!r} must be in [0, 1]")
+    _positive(plan.eval.episodes, "eval.episodes")
+    f = plan.finetune
+    if not f.tiers or list(f.tiers) != sorted(set(f.tiers)):
+        raise ConfigError(f"plan finetune.tiers = {list(f.tiers)!r} must be increasing episode counts")
+    for k in f.tiers:
+        _positive(k, "finetune.tiers")
+    if f.tiers[-1] > c.episodes:
+        raise ConfigError(f"plan finetune.tiers has tier {f.tiers[-1]} above the collection size collect.episodes = "
+                          f"{c.episodes}; raise collect.episodes or drop the tier")
+    _positive(f.steps, "finetune.steps")
+    _seeds(f.seeds, "finetune.seeds")
+    for m in f.baselines:
+        _method(m, "finetune.baselines")
+    if plan.continual is not None:
+        s = plan.continual
+        seq = [_shift(x, "continual.sequence") for x in s.sequence]
+        if not seq or len(set(seq)) != len(seq):
+            raise ConfigError(f"plan continual.sequence = {list(s.sequence)!r} must name distinct shifts")
+        _positive(s.episodes, "continual.episodes")
+        _positive(s.steps, "continual.steps")
+        if s.episodes > c.episodes:
+            raise ConfigError(f"plan continual.episodes = {s.episodes} is above the collection size collect.episodes "
+                              f"= {c.episodes} (its first stage uses the base policy's collection)")
+    if plan.curves is not None:
+        cv = plan.curves
+        _shift(cv.shift, "curves.shift")
+        for m in cv.methods:
+            _method(m, "curves.methods")
+        if not cv.methods:
+            raise ConfigError("plan curves.methods is empty; name at least one method, e.g. ['ft']")
+        for k in ("episodes", "steps", "every", "eval_episodes"):
+            _positive(getattr(cv, k), f"curves.{k}")
+        if cv.episodes > c.episodes:
+            raise ConfigError(f"plan curves.episodes = {cv.episodes} is above the collection size collect.episodes "
+                              f"= {c.episodes}")
+        _seeds(cv.seeds, "curves.seeds")
+    if plan.early_stop is not None:
+        es = plan.early_stop
+        _shift(es.shift, "early_stop.shift")
+        for k in ("episodes", "steps", "every", "eval_episodes", "patience"):
+            _positive(getattr(es, k), f"early_stop.{k}")
+        if es.episodes > c.episodes:
+            raise ConfigError(f"plan early_stop.episodes = {es.episodes} is above the collection size "
+                              f"collect.episodes = {c.episodes}")
+        for crit in es.criteria:
+            if crit not in CRITERIA:
+                raise unknown("stopping criterion", crit, CRITERIA, "(plan early_stop.criteria)")
+        if not 0.0 < es.holdout < 1.0 or round(es.holdout * es.episodes) < 2:
+            raise ConfigError(f"plan early_stop.holdout = {es.holdout!r} must be in (0, 1) and hold out at least 2 "
+                              f"of the {es.episodes} episodes")

@@ -1,0 +1,601 @@
+"""The study's report: tables beside the source study's figures, plots, and findings (a)-(e) with intervals.
+
+Two steps.  :func:`gather` reads the finished units' outputs (catalogued
+evaluations, curve files) into ``records.json``: plain counts, no derived
+numbers.  Everything else is a pure function of those records (and so can be
+tested on hand-made ones): the tables, the plots and :func:`findings`.
+
+Intervals: a success rate gets its 95% Wilson interval; a difference of two
+rates gets Newcombe's hybrid score interval (built from the two Wilson
+intervals; it treats the rates as independent, which is conservative for our
+paired scenes); a cell with several training seeds pools their episodes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from nsl.eval import CurveRow, PerformanceMatrix, choose_steps, continual_metrics, wilson_interval
+
+from . import reference as ref
+from .plan import Plan
+from .units import BASE_POLICY, continual_tags, train_tag
+
+REPORT_FILE = "report.md"
+RECORDS_FILE = "records.json"
+OFFLINE_CRITERIA = ("softopc", "auc", "td")
+
+
+# --- counts ---------------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Count:
+    successes: int
+    episodes: int
+
+    @property
+    def rate(self) -> float:
+        return self.successes / self.episodes
+
+    @property
+    def ci(self) -> tuple[float, float]:
+        return wilson_interval(self.successes, self.episodes)
+
+    def pct(self) -> str:
+        lo, hi = self.ci
+        return f"{100 * self.rate:.0f}% [{100 * lo:.0f}-{100 * hi:.0f}]"
+
+    def to_dict(self) -> dict:
+        return {"successes": self.successes, "episodes": self.episodes}
+
+
+def count(d: Mapping | None) -> Count | None:
+    return None if not d else Count(int(d["successes"]), int(d["episodes"]))
+
+
+def pooled(items: Sequence[Mapping | None]) -> Count | None:
+    """Several seeds' counts as one (None if any is missing)."""
+    cs = [count(d) for d in items]
+    if not cs or any(c is None for c in cs):
+        return None
+    return Count(sum(c.successes for c in cs), sum(c.episodes for c in cs))
+
+
+def diff_interval(a: Count, b: Count) -> tuple[float, float, float]:
+    """(a - b, low, high): Newcombe's hybrid score interval (method 10) for a difference of proportions."""
+    (l1, u1), (l2, u2) = a.ci, b.ci
+    d = a.rate - b.rate
+    return d, d - math.sqrt((a.rate - l1) ** 2 + (u2 - b.rate) ** 2), d + math.sqrt((u1 - a.rate) ** 2 +
+                                                                                  (b.rate - l2) ** 2)
+
+
+def points(a: Count, b: Count) -> str:
+    d, lo, hi = diff_interval(a, b)
+    return f"{100 * d:+.0f} [{100 * lo:+.0f}, {100 * hi:+.0f}]"
+
+
+def _pretty(shift: str) -> str:
+    return shift.replace("_", " ")
+
+
+# --- gathering the records ------------------------------------------------------------------------------------------
+
+def gather(plan: Plan, study: str, evaluation, read_curve_file) -> dict[str, Any]:
+    """The study's raw numbers from its outputs: ``evaluation(ref, shift, episodes, seed)`` -> catalog entry or
+    None; ``read_curve_file(checkpoint_name)`` -> list of CurveRow or None."""
+    e = plan.eval
+
+    def ev(policy: str, shift: str) -> dict | None:
+        r = plan.base if policy == BASE_POLICY else f"ckpt:{study}-{policy}@latest"
+        entry = evaluation(r, shift, e.episodes, e.seed)
+        return None if entry is None else {"successes": entry.successes, "episodes": entry.episodes}
+
+    out: dict[str, Any] = {"study": study, "plan": plan.to_dict()}
+    shifts = list(plan.shifts)
+    extra = [*(plan.continual.sequence if plan.continual else ()), *([plan.curves.shift] if plan.curves else ()),
+             *([plan.early_stop.shift] if plan.early_stop else ())]
+    out["base_policy"] = {s: ev(BASE_POLICY, s) for s in dict.fromkeys(["base", *shifts, *extra])}
+    f = plan.finetune
+    top = f.tiers[-1]
+    tiers = {}
+    for shift in shifts:
+        row: dict[str, Any] = {"tiers": {}, "tiers_base": {}, "baselines": {}, "baselines_base": {}}
+        for k in f.tiers:
+            tags = [train_tag("ft", shift, k, f.steps, s) for s in f.seeds]
+            row["tiers"][str(k)] = [ev(t, shift) for t in tags]
+            row["tiers_base"][str(k)] = [ev(t, "base") for t in tags]
+        for m in f.baselines:
+            tags = [train_tag(m, shift, top, f.steps, s) for s in f.seeds]
+            row["baselines"][m] = [ev(t, shift) for t in tags]
+            row["baselines_base"][m] = [ev(t, "base") for t in tags]
+        tiers[shift] = row
+    out["finetune"] = tiers
+    if plan.continual is not None:
+        c = plan.continual
+        tasks = ["base", *c.sequence]
+        stages = [[ev(BASE_POLICY, t) for t in tasks]]
+        for tag in continual_tags(plan):
+            stages.append([ev(tag, t) for t in tasks])
+        single = {s: ev(train_tag("ft", s, c.episodes, c.steps, c.seed), s) for s in c.sequence}
+        out["continual"] = {"tasks": tasks, "stages": ["base policy", *c.sequence], "cells": stages,
+                            "single": single}
+    if plan.curves is not None:
+        cv = plan.curves
+        curves = {}
+        for m in cv.methods:
+            curves[m] = {str(s): _rows(read_curve_file(
+                f"{study}-{train_tag(m, cv.shift, cv.episodes, cv.steps, s, prefix=f'curve-{m}')}"))
+                for s in cv.seeds}
+        out["curves"] = curves
+    if plan.early_stop is not None:
+        es = plan.early_stop
+        out["early_stop"] = _rows(read_curve_file(
+            f"{study}-{train_tag('ft', es.shift, es.episodes, es.steps, es.seed, prefix='es')}"))
+    return out
+
+
+def _rows(rows: Sequence[CurveRow] | None) -> list[dict] | None:
+    return None if rows is None else [r.to_dict() for r in rows]
+
+
+def _curve(rows: Sequence[Mapping] | None) -> list[CurveRow]:
+    return [CurveRow.from_dict(r) for r in rows or []]
+
+
+# --- tables ---------------------------------------------------------------------------------------------------------
+
+def challenge_table(records: Mapping[str, Any]) -> str:
+    """Table 5.1: the base policy on the base task and each shift, the drop in points, the study's figures."""
+    plan = records["plan"]
+    bp = records["base_policy"]
+    base = count(bp.get("base"))
+    lines = ["| task | base policy (ours) | change, points (ours) | study (real robot) | study change |",
+             "|---|---|---|---|---|"]
+    lines.append(f"| base task | {'-' if base is None else base.pct()} | - | {ref.BASE_TASK}% | - |")
+    for s in plan["shifts"]:
+        c = count(bp.get(s))
+        drop = "-" if c is None or base is None else points(c, base)
+        study = ref.CHALLENGE.get(s)
+        lines.append(f"| {_pretty(s)} | {'-' if c is None else c.pct()} | {drop} | "
+                     f"{'-' if study is None else f'{study}%'} | "
+                     f"{'-' if study is None else f'{study - ref.BASE_TASK:+d}'} |")
+    return "\n".join(lines)
+
+
+def tiers_table(records: Mapping[str, Any]) -> str:
+    """Table 5.2: target success by tier, the baselines at the top tier; a 'study' row under each shift."""
+    plan = records["plan"]
+    tiers = plan["finetune"]["tiers"]
+    baselines = plan["finetune"]["baselines"]
+    head = ["challenge", "", "base policy", *[str(k) for k in tiers], *[f"{m} ({tiers[-1]})" for m in baselines]]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for shift, row in records["finetune"].items():
+        base = count(records["base_policy"].get(shift))
+        cells = [_pretty(shift), "ours", "-" if base is None else base.pct()]
+        cells += ["-" if (c := pooled(row["tiers"][str(k)])) is None else c.pct() for k in tiers]
+        cells += ["-" if (c := pooled(row["baselines"][m])) is None else c.pct() for m in baselines]
+        lines.append("| " + " | ".join(cells) + " |")
+        study = ref.FINETUNE.get(shift)
+        if study is not None:
+            cells = ["", "study", f"{study['base']}%", *[f"{study[k]}%" if k in study else "-" for k in tiers],
+                     *[f"{study[m]}%" if m in study else "-" for m in baselines]]
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def tiers_base_table(records: Mapping[str, Any]) -> str:
+    """The same fine-tuned checkpoints on the base task (forgetting), with the study's base-task row."""
+    plan = records["plan"]
+    tiers = plan["finetune"]["tiers"]
+    baselines = plan["finetune"]["baselines"]
+    base = count(records["base_policy"].get("base"))
+    head = ["fine-tuned for", "base policy", *[str(k) for k in tiers], *[f"{m} ({tiers[-1]})" for m in baselines]]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for shift, row in records["finetune"].items():
+        cells = [_pretty(shift), "-" if base is None else base.pct()]
+        cells += ["-" if (c := pooled(row["tiers_base"][str(k)])) is None else c.pct() for k in tiers]
+        cells += ["-" if (c := pooled(row["baselines_base"][m])) is None else c.pct() for m in baselines]
+        lines.append("| " + " | ".join(cells) + " |")
+    s = ref.FINETUNE["base"]
+    lines.append("| study (base task, real robot) | " + " | ".join(
+        [f"{s['base']}%", *[f"{s[k]}%" if k in s else "-" for k in tiers],
+         *[f"{s[m]}%" if m in s else "-" for m in baselines]]) + " |")
+    return "\n".join(lines)
+
+
+def continual_matrix(records: Mapping[str, Any]) -> PerformanceMatrix | None:
+    c = records.get("continual")
+    if not c:
+        return None
+    rows = [r for r in c["cells"]]
+    while rows and all(x is None for x in rows[-1]):
+        rows.pop()  # stages not evaluated yet
+    if not rows:
+        return None
+    success = [[None if x is None else count(x).rate for x in r] for r in rows]
+    episodes = [[None if x is None else count(x).episodes for x in r] for r in rows]
+    single = {s: count(v).rate for s, v in c["single"].items() if v is not None}
+    stages = ["base", *c["tasks"][1:]][:len(rows)]
+    return PerformanceMatrix(tuple(c["tasks"]), tuple(stages), success, episodes, "base", single or None)
+
+
+def continual_table(records: Mapping[str, Any]) -> str:
+    """Table 5.3: each stage on its own task, vs the base policy, vs single-step fine-tuning; the study's numbers."""
+    m = continual_matrix(records)
+    if m is None:
+        return "(no continual results yet)"
+    c = records["continual"]
+    cells = c["cells"]
+    tasks = c["tasks"]
+    lines = ["| stage task | continual (own stage) | vs base policy | single-step from base | vs single | final | "
+             "study: final | study: vs single |", "|---|---|---|---|---|---|---|---|"]
+    T = len(m.stages) - 1
+    for i, task in enumerate(tasks[1:], 1):
+        j = tasks.index(task)
+        own = count(cells[i][j]) if i <= T else None
+        base = count(cells[0][j])
+        single = count(c["single"].get(task))
+        final = count(cells[T][j]) if T >= 1 else None
+        lines.append(
+            f"| {_pretty(task)} | {'-' if own is None else own.pct()} | "
+            f"{'-' if own is None or base is None else points(own, base)} | {'-' if single is None else single.pct()} | "
+            f"{'-' if own is None or single is None else points(own, single)} | {'-' if final is None else final.pct()} | "
+            f"{ref.CONTINUAL.get(task, '-')}% | {ref.CONTINUAL_VS_SINGLE.get(task, 0):+d} |")
+    b0, bT = count(cells[0][0]), count(cells[T][0])
+    if b0 is not None and bT is not None:
+        lines.append(f"| base task | {b0.pct()} (base policy) | - | - | - | {bT.pct()} ({points(bT, b0)}) | "
+                     f"no forgetting found | - |")
+    return "\n".join(lines)
+
+
+def matrix_table(records: Mapping[str, Any]) -> str:
+    m = continual_matrix(records)
+    if m is None:
+        return "(no continual results yet)"
+    lines = ["| after stage | " + " | ".join(_pretty(t) for t in m.tasks) + " |", "|---|" + "---|" * len(m.tasks)]
+    for i, stage in enumerate(m.stages):
+        cells = ["-" if m.rate(i, j) is None else m.rate(i, j).percent() for j in range(len(m.tasks))]
+        lines.append(f"| {i}: {_pretty(stage)} | " + " | ".join(cells) + " |")
+    metrics = continual_metrics(m)
+    lines.append("")
+    lines.append(f"Average forgetting {_pts(metrics.average_forgetting)} points, backward transfer "
+                 f"{_pts(metrics.average_backward_transfer)} points, average final success "
+                 f"{_pct(metrics.average_final_success)} (eval.continual's definitions).")
+    return "\n".join(lines)
+
+
+def _pts(v: float | None) -> str:
+    return "-" if v is None else f"{100 * v:+.0f}"
+
+
+def _pct(v: float | None) -> str:
+    return "-" if v is None else f"{100 * v:.0f}%"
+
+
+def curves_table(records: Mapping[str, Any]) -> str:
+    """Figs. 5.4/5.9 in numbers: per method, target and base-task success at the first, best and last point."""
+    curves = records.get("curves")
+    if not curves:
+        return "(no method curves yet)"
+    lines = ["| method | seeds | target at step 0 | best target (step) | target at last step | base task at last step "
+             "| study (sim, Fig. 5.4) |", "|---|---|---|---|---|---|---|"]
+    for method, by_seed in curves.items():
+        pts = mean_curve(by_seed, "target")
+        basepts = mean_curve(by_seed, "base")
+        if not pts:
+            lines.append(f"| {method} | {len(by_seed)} | - | - | - | - | {ref.CURVES.get(method, '-')} |")
+            continue
+        best = max(pts, key=lambda p: (p[1].rate, -p[0]))
+        lines.append(f"| {method} | {len(by_seed)} | {pts[0][1].pct()} | {best[1].pct()} ({best[0]}) | "
+                     f"{pts[-1][1].pct()} | {basepts[-1][1].pct() if basepts else '-'} | "
+                     f"{ref.CURVES.get(method, '-')} |")
+    return "\n".join(lines)
+
+
+def mean_curve(by_seed: Mapping[str, Sequence[Mapping] | None], which: str) -> list[tuple[int, Count]]:
+    """(step, pooled count over seeds) at the steps every seed evaluated."""
+    per_seed = []
+    for rows in by_seed.values():
+        d = {}
+        for r in _curve(rows):
+            rate = r.target if which == "target" else r.base
+            if rate is not None and rate.episodes:
+                d[r.step] = Count(round(rate.success_rate * rate.episodes), rate.episodes)
+        per_seed.append(d)
+    if not per_seed or any(not d for d in per_seed):
+        return []
+    steps = sorted(set.intersection(*(set(d) for d in per_seed)))
+    return [(s, Count(sum(d[s].successes for d in per_seed), sum(d[s].episodes for d in per_seed))) for s in steps]
+
+
+def early_stop_choices(records: Mapping[str, Any]) -> dict[str, Any]:
+    """Each planned criterion's choice on the recorded curve (None: the criterion produced no choice)."""
+    plan = records["plan"]
+    es = plan.get("early_stop")
+    rows = _curve(records.get("early_stop"))
+    if not es or not rows:
+        return {}
+    choices = choose_steps(rows, patience=es["patience"])
+    out = {"best": choices.get("best"), "final": choices.get("final")}
+    for c in es["criteria"]:
+        out[c] = choices.get(c)
+    return out
+
+
+def early_stop_table(records: Mapping[str, Any]) -> str:
+    choices = early_stop_choices(records)
+    if not choices:
+        return "(no early-stopping curve yet)"
+    lines = ["| criterion | chosen step | target success | base task | points below the best |",
+             "|---|---|---|---|---|"]
+    best = choices.get("best")
+    for name, c in choices.items():
+        label = {"best": "best point (oracle)", "final": "last step (no stopping)"}.get(name, name)
+        if c is None:
+            lines.append(f"| {label} | no choice | - | - | - |")
+            continue
+        regret = "-" if c.target_regret is None else f"{100 * c.target_regret:.0f}"
+        lines.append(f"| {label} | {c.step} | {'-' if c.target is None else c.target.percent()} | "
+                     f"{'-' if c.base is None else c.base.percent()} | {regret if best is not None else '-'} |")
+    return "\n".join(lines)
+
+
+# --- findings -------------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Finding:
+    key: str  # a..e
+    claim: str
+    holds: bool | None  # None: not measured (no results yet, or no choice)
+    ours: str  # our numbers, with intervals
+    study: str  # the study's numbers
+
+    @property
+    def verdict(self) -> str:
+        return {True: "holds", False: "fails", None: "not measured"}[self.holds]
+
+
+def findings(records: Mapping[str, Any]) -> list[Finding]:
+    """Findings (a)-(e) of the study, tested on our numbers (point estimates decide; intervals are shown)."""
+    plan = records["plan"]
+    bp = records["base_policy"]
+    base = count(bp.get("base"))
+    out = []
+    # (a) every shift costs the base policy at least 10 points
+    drops = {s: (base, count(bp.get(s))) for s in plan["shifts"]}
+    measured = {s: v for s, v in drops.items() if v[0] is not None and v[1] is not None}
+    holds = None if len(measured) < len(drops) else all(diff_interval(a, b)[0] >= 0.10 - 1e-12
+                                                         for a, b in measured.values())
+    out.append(Finding("a", "every shift costs the base policy at least 10 points", holds,
+                       "drops of " + "; ".join(f"{_pretty(s)} {points(a, b)}" for s, (a, b) in measured.items())
+                       if measured else "-",
+                       "drops of " + ", ".join(f"{v}" for v in ref.STUDY_DROPS.values()) + " points (10-55)"))
+    # (b) fine-tuning on the top tier gains at least the study's +27 points on average; reaches base on 2 of 5
+    top = str(plan["finetune"]["tiers"][-1])
+    gains, reached, parts = [], [], []
+    for shift, row in records["finetune"].items():
+        ft, b0 = pooled(row["tiers"][top]), count(bp.get(shift))
+        if ft is None or b0 is None:
+            continue
+        gains.append(ft.rate - b0.rate)
+        parts.append(f"{_pretty(shift)} {points(ft, b0)}")
+        if base is not None and ft.rate >= base.rate:
+            reached.append(shift)
+    n = len(records["finetune"])
+    if len(gains) < n:
+        holds_b = None
+    else:
+        holds_b = sum(gains) / n >= ref.STUDY_MEAN_GAIN_800 / 100 and len(reached) >= 2 * n / 5
+    out.append(Finding(
+        "b", f"fine-tuning on {top} episodes gains at least as much as the study's (mean +27 points; reaches the base "
+             "policy's base-task success on 2 of 5 shifts)", holds_b,
+        (f"mean {100 * sum(gains) / len(gains):+.0f} points ({'; '.join(parts)}); reaches the base policy's "
+         f"base-task success on {len(reached)} of {n}" + (f" ({', '.join(map(_pretty, reached))})" if reached else ""))
+        if gains else "-",
+        "mean +27 points over the five shifts (800 attempts); 2 of 5 reached 86% (checkerboard, offset gripper)"))
+    # (c) fine-tuning beats scratch at the top tier by 30 points or more
+    parts, diffs = [], []
+    for shift, row in records["finetune"].items():
+        ft, sc = pooled(row["tiers"][top]), pooled(row["baselines"].get("scratch", []))
+        if ft is None or sc is None:
+            continue
+        diffs.append(diff_interval(ft, sc)[0])
+        parts.append(f"{_pretty(shift)} {points(ft, sc)}")
+    has_scratch = "scratch" in plan["finetune"]["baselines"]
+    holds_c = None if not has_scratch or len(diffs) < n else all(d >= 0.30 - 1e-12 for d in diffs)
+    out.append(Finding("c", f"fine-tuning beats scratch at {top} episodes by 30 points or more on every shift", holds_c,
+                       "; ".join(parts) or "-",
+                       "+" + ", +".join(str(v[800] - v["scratch"]) for k, v in ref.FINETUNE.items() if k != "base")
+                       + " points"))
+    # (d) the continual sequence loses 5 points or less on the base task
+    holds_d, ours_d = None, "-"
+    m = continual_matrix(records)
+    if m is not None and plan.get("continual") and len(m.stages) == len(plan["continual"]["sequence"]) + 1:
+        c = records["continual"]["cells"]
+        b0, bT = count(c[0][0]), count(c[-1][0])
+        if b0 is not None and bT is not None:
+            d = diff_interval(b0, bT)
+            holds_d = d[0] <= 0.05 + 1e-12
+            ours_d = f"base task {b0.pct()} before, {bT.pct()} after the last stage: lost {points(b0, bT)} points"
+    out.append(Finding("d", "the continual sequence loses 5 points or less on the base task", holds_d, ours_d,
+                       "no forgetting of the base task was found"))
+    # (e) an offline stopping criterion lands within 5 points of the best point
+    choices = early_stop_choices(records)
+    holds_e, ours_e = None, "-"
+    if choices and choices.get("best") is not None:
+        best = choices["best"]
+        parts, regrets = [], []
+        for crit in [c for c in choices if c in OFFLINE_CRITERIA]:
+            ch = choices[crit]
+            if ch is None or ch.target_regret is None:
+                parts.append(f"{crit}: no choice")
+                continue
+            regrets.append(ch.target_regret)
+            parts.append(f"{crit}: step {ch.step}, {ch.target.percent()}, {100 * ch.target_regret:.0f} points below")
+        holds_e = None if not regrets else min(regrets) <= 0.05 + 1e-12
+        ours_e = f"best point step {best.step}, {best.target.percent()}; " + "; ".join(parts)
+    out.append(Finding("e", "an offline stopping criterion lands within 5 points of the best point", holds_e, ours_e,
+                       "not solved in the study (" + ref.EARLY_STOP + ")"))
+    return out
+
+
+def findings_table(items: Sequence[Finding]) -> str:
+    lines = ["| finding | verdict | ours (95% intervals) | study |", "|---|---|---|---|"]
+    for f in items:
+        lines.append(f"| ({f.key}) {f.claim} | **{f.verdict}** | {f.ours} | {f.study} |")
+    return "\n".join(lines)
+
+
+# --- plots ----------------------------------------------------------------------------------------------------------
+
+def plot_tiers(records: Mapping[str, Any], path: Path) -> Path:
+    """Success against target episodes per shift (ours solid with 95% intervals, the study's dotted)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tiers = records["plan"]["finetune"]["tiers"]
+    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    for i, (shift, row) in enumerate(records["finetune"].items()):
+        colour = f"C{i % 10}"
+        pts = [(k, pooled(row["tiers"][str(k)])) for k in tiers]
+        pts = [(k, c) for k, c in pts if c is not None]
+        b0 = count(records["base_policy"].get(shift))
+        if b0 is not None:
+            pts = [(0, b0), *pts]
+        if pts:
+            x = [k for k, _ in pts]
+            y = [100 * c.rate for _, c in pts]
+            err = [[max(0.0, 100 * (c.rate - c.ci[0])) for _, c in pts], [max(0.0, 100 * (c.ci[1] - c.rate))
+                                                                          for _, c in pts]]
+            ax.errorbar(x, y, yerr=err, fmt="o-", color=colour, capsize=3, ms=4, label=_pretty(shift))
+        study = ref.FINETUNE.get(shift)
+        if study is not None:
+            ks = [k for k in ref.TIERS if k <= max(tiers)]
+            ax.plot([0, *ks], [study["base"], *[study[k] for k in ks]], ":", color=colour, alpha=0.6)
+    ax.set_xscale("symlog", linthresh=max(1, min(tiers)))
+    ax.set_xticks([0, *tiers], ["base", *[str(k) for k in tiers]])
+    ax.set_ylim(-2, 102)
+    ax.set_xlabel("target episodes in the fine-tuning data")
+    ax.set_ylabel("success on the shift (%, 95% CI)")
+    ax.set_title("Fine-tuning by data size (solid: ours; dotted: the study, real robot)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def plot_curves(records: Mapping[str, Any], path: Path) -> Path:
+    """Target and base-task success over gradient steps per method: seeds thin, pooled mean with 95% band."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
+    for ax, which, title in ((axes[0], "target", f"target: {_pretty(records['plan']['curves']['shift'])}"),
+                             (axes[1], "base", "base task")):
+        for i, (method, by_seed) in enumerate(records["curves"].items()):
+            colour = f"C{i % 10}"
+            for rows in by_seed.values():
+                seed_pts = mean_curve({"_": rows}, which)
+                if seed_pts:
+                    ax.plot([s for s, _ in seed_pts], [100 * c.rate for _, c in seed_pts], color=colour, alpha=0.25,
+                            lw=0.8)
+            pts = mean_curve(by_seed, which)
+            if pts:
+                x = [s for s, _ in pts]
+                ax.plot(x, [100 * c.rate for _, c in pts], "o-", color=colour, ms=3, label=method)
+                ax.fill_between(x, [100 * c.ci[0] for _, c in pts], [100 * c.ci[1] for _, c in pts], color=colour,
+                                alpha=0.15)
+        ax.set_title(title)
+        ax.set_xlabel("gradient steps")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("success (%, pooled over seeds, 95% CI)")
+    axes[0].set_ylim(-2, 102)
+    axes[0].legend(fontsize=8)
+    return _save(fig, path)
+
+
+def plot_early_stop(records: Mapping[str, Any], path: Path) -> Path:
+    from nsl.eval import plot_curve
+
+    rows = _curve(records["early_stop"])
+    choices = {k: v for k, v in early_stop_choices(records).items() if v is not None}
+    return plot_curve(rows, path, choices=choices)
+
+
+def _save(fig, path: Path) -> Path:
+    from nsl.workspace import atomic_write_bytes
+    import io
+
+    buf = io.BytesIO()
+    fig.tight_layout()
+    fig.savefig(buf, format="png", dpi=110)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    atomic_write_bytes(Path(path), buf.getvalue())
+    return Path(path)
+
+
+# --- the document ---------------------------------------------------------------------------------------------------
+
+def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures: Mapping[str, str]) -> str:
+    plan = records["plan"]
+    st = status or {}
+    units = st.get("units", {})
+    seconds = sum(u.get("seconds") or 0 for u in units.values())
+    done = sum(u.get("state") == "done" for u in units.values())
+    c = plan["collect"]
+    parts = [f"# Study `{records['study']}`", "",
+             f"Plan: base `{plan['base']}`, shifts {', '.join(plan['shifts'])}; target data collected by the base "
+             f"policy with **epsilon {c['epsilon']}** (random action probability per step), {c['episodes']} episodes "
+             f"per shift (seed {c['seed']}); evaluations on {plan['eval']['episodes']} test-object scenes per cell "
+             f"(scene seed {plan['eval']['seed']}, paired across checkpoints); base-task data: "
+             f"{plan['base_data']['source']}"
+             + ("" if plan['base_data'].get('verify', True) or plan['base_data']['source'] != 'checkpoint'
+                else " (**hashes not checked**: base_data.verify = false)") + ".", "",
+             f"Units done: {done} of {len(units)}; time spent in units: {seconds / 60:.1f} minutes.",
+             "Every 'study' figure is the real-robot result of the source study (NOTES.md, Tables 5.1-5.3); ours are "
+             "simulation, with 95% Wilson intervals (differences: Newcombe intervals).", "",
+             "## Findings", "", findings_table(findings(records)), "",
+             "## Challenge table (Table 5.1)", "", challenge_table(records), "",
+             "## Fine-tuning by data size (Table 5.2)", "",
+             f"Fine-tune all parameters from the base, batches 50/50 base data and the first K target episodes, "
+             f"25% of the base's learning rate, {plan['finetune']['steps']} steps, seeds "
+             f"{', '.join(map(str, plan['finetune']['seeds']))} (pooled). Success on the shift:", "", tiers_table(records), ""]
+    if "tiers" in figures:
+        parts += [f"![fine-tuning by data size]({figures['tiers']})", ""]
+    parts += ["The same checkpoints on the base task:", "", tiers_base_table(records), ""]
+    if plan.get("continual"):
+        parts += ["## The continual sequence (Table 5.3)", "",
+                  f"{' -> '.join(['base', *plan['continual']['sequence']])}; each stage's policy collects "
+                  f"{plan['continual']['episodes']} episodes and fine-tunes from the previous stage, "
+                  f"{plan['continual']['steps']} steps. Single-step: the base fine-tuned on the base policy's "
+                  "episodes of that shift (same size and steps).", "", continual_table(records), "",
+                  "Performance matrix (rows: after each stage; columns: evaluated task):", "", matrix_table(records),
+                  ""]
+    if plan.get("curves"):
+        cv = plan["curves"]
+        parts += ["## Method curves (Figs. 5.4 and 5.9)", "",
+                  f"{_pretty(cv['shift'])}, {cv['episodes']} target episodes, evaluated every {cv['every']} steps on "
+                  f"{cv['eval_episodes']} scenes (target and base task), seeds {', '.join(map(str, cv['seeds']))}.", "",
+                  curves_table(records), ""]
+        if "curves" in figures:
+            parts += [f"![method curves]({figures['curves']})", ""]
+    if plan.get("early_stop"):
+        es = plan["early_stop"]
+        parts += ["## Overfitting and early stopping (Fig. 5.7)", "",
+                  f"{_pretty(es['shift'])}, {es['episodes']} target episodes ({int(es['holdout'] * 100)}% held out "
+                  f"for the offline criteria), {es['steps']} steps, evaluated every {es['every']} steps on "
+                  f"{es['eval_episodes']} scenes; each criterion replayed with patience {es['patience']}. The 'eval' "
+                  "criterion and the oracle see the same scenes. A criterion with no values on the curve made no "
+                  "choice.", "", early_stop_table(records), ""]
+        if "early_stop" in figures:
+            parts += [f"![early stopping]({figures['early_stop']})", ""]
+    return "\n".join(parts)

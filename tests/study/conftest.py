@@ -1,0 +1,85 @@
+"""Fixtures for the study tests: a small plan file (every experiment, toy sizes) and one finished run of it."""
+
+from __future__ import annotations
+
+import pytest
+
+# Smaller than the shipped `tiny` plan so that the end-to-end and kill tests stay within a few minutes:
+# two shifts, tiers 4/8, 10 training steps, 4 evaluation scenes, one seed, every experiment switched on.
+MINI_PLAN = """
+name = "mini"
+base = "ckpt:base"
+shifts = ["harsh_lighting", "offset_gripper"]
+checkpoint_every = 5
+
+[base_data]
+source = "plan"
+
+[[base_data.datasets]]
+name = "mini-base-oracle"
+policy = "oracle:0.5"
+seed = 1
+episodes = 12
+
+[collect]
+episodes = 8
+epsilon = 0.1
+seed = 5
+
+[eval]
+episodes = 4
+seed = 2000
+
+[finetune]
+tiers = [4, 8]
+steps = 10
+seeds = [0]
+baselines = ["scratch"]
+
+[continual]
+sequence = ["harsh_lighting", "offset_gripper"]
+episodes = 8
+steps = 10
+
+[curves]
+shift = "harsh_lighting"
+episodes = 8
+methods = ["ft"]
+steps = 10
+every = 5
+eval_episodes = 4
+seeds = [0]
+
+[early_stop]
+shift = "offset_gripper"
+episodes = 8
+steps = 10
+every = 5
+eval_episodes = 4
+criteria = ["eval", "softopc", "auc", "td"]
+patience = 2
+holdout = 0.25
+"""
+
+
+@pytest.fixture(scope="session")
+def mini_plan(tmp_path_factory):
+    path = tmp_path_factory.mktemp("plans") / "mini.toml"
+    path.write_text(MINI_PLAN)
+    return path
+
+
+@pytest.fixture(scope="session")
+def mini_home(tmp_path_factory):
+    return tmp_path_factory.mktemp("mini_home")
+
+
+@pytest.fixture
+def mini_run(mini_plan, mini_home, monkeypatch):
+    """The mini plan run once, uninterrupted, through the real CLI (shared by the tests of this folder)."""
+    from tests.conftest import run_cli
+
+    monkeypatch.setenv("NSL_HOME", str(mini_home))
+    if not (mini_home / "studies" / "mini" / "report.md").is_file():
+        assert run_cli("study", "run", str(mini_plan), "--quiet") == 0
+    return mini_home

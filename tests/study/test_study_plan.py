@@ -1,0 +1,98 @@
+"""Plans are checked before any work: a bad plan is refused in one line and creates no unit output."""
+
+from __future__ import annotations
+
+import pytest
+
+from nsl.errors import ConfigError, UnknownReferenceError
+from nsl.study import SHIPPED, build_units, load_plan, unit_graph
+from nsl.study.units import BaseSource, order
+from tests.conftest import run_cli
+
+from .conftest import MINI_PLAN
+
+
+def _write(tmp_path, text: str, name: str = "bad"):
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text)
+    return path
+
+
+def _outputs(home) -> list[str]:
+    """Everything a unit could have created: datasets, runs, checkpoints, study folders.
+
+    Resolving ``ckpt:base`` registers the checkpoint shipped with nsl (``checkpoints/base``): not a unit output.
+    """
+    return sorted(str(p.relative_to(home)) for sub in ("datasets", "runs", "checkpoints", "studies")
+                  if (home / sub).exists() for p in (home / sub).rglob("*")
+                  if not str(p.relative_to(home)).startswith("checkpoints/base"))
+
+
+@pytest.mark.parametrize("change, message", [
+    (("shifts = [\"harsh_lighting\", \"offset_gripper\"]", "shifts = [\"harsh_lighting\", \"offset_griper\"]"),
+     "plan shifts: unknown shift 'offset_griper'; did you mean 'offset_gripper'"),
+    (("tiers = [4, 8]", "tiers = [4, 8, 16]"),
+     "plan finetune.tiers has tier 16 above the collection size collect.episodes = 8"),
+    (("baselines = [\"scratch\"]", "baselines = [\"scratch\", \"imagenet\"]"), "unknown method 'imagenet'"),
+    (("methods = [\"ft\"]", "methods = [\"ft\", \"pnn2\"]"), "unknown method 'pnn2'"),
+    (("criteria = [\"eval\", \"softopc\", \"auc\", \"td\"]", "criteria = [\"eval\", \"opc\"]"),
+     "unknown stopping criterion 'opc'"),
+    (("source = \"plan\"\n", "source = \"checkpoint\"\n"),
+     "base data grasp-base-oracle@v1 (sha256:396814441b45...) of ckpt:base is not in $NSL_HOME and the plan has no "
+     "recipe"),
+    (("[eval]\nepisodes = 4", "[eval]\nepisodes = 4\nepisode = 5"), "plan [eval] has unknown setting(s) ['episode']"),
+])
+def test_bad_plan_is_refused_in_one_line_before_any_work(tmp_path, nsl_home, capsys, change, message):
+    old, new = change
+    assert old in MINI_PLAN
+    path = _write(tmp_path, MINI_PLAN.replace(old, new))
+    assert run_cli("study", "run", str(path)) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("nsl: error: ") and message in err and err.count("\n") == 1, err
+    assert _outputs(nsl_home) == []
+
+
+def test_missing_base_data_is_refused_when_the_plan_cannot_collect_it(tmp_path, nsl_home):
+    text = MINI_PLAN.replace('source = "plan"\n', 'source = "checkpoint"\n')
+    with pytest.raises(UnknownReferenceError, match="scripts/collect_base_data.sh"):
+        run_cli("--debug", "study", "run", str(_write(tmp_path, text)))
+    assert _outputs(nsl_home) == []
+
+
+def test_a_recipe_for_recorded_base_data_must_match_the_record(tmp_path, nsl_home):
+    """With the base's own data as source, a recipe of another size is refused (its hash could not match)."""
+    text = MINI_PLAN.replace('source = "plan"\n', 'source = "checkpoint"\n').replace(
+        'name = "mini-base-oracle"', 'name = "grasp-base-oracle"')
+    for name, policy, seed in (("grasp-base-noisy", "oracle:1.0", 2), ("grasp-base-random", "random", 3)):
+        text = text.replace("[collect]", f'[[base_data.datasets]]\nname = "{name}"\npolicy = "{policy}"\n'
+                                         f"seed = {seed}\nepisodes = 2000\n\n[collect]")
+    with pytest.raises(ConfigError, match="has episodes = 12, but ckpt:base was trained on 4000"):
+        run_cli("--debug", "study", "run", str(_write(tmp_path, text)))
+    assert _outputs(nsl_home) == []
+
+
+def test_a_study_name_is_bound_to_its_plan(tmp_path, mini_run, capsys):
+    path = _write(tmp_path, MINI_PLAN.replace("steps = 10\nseeds = [0]", "steps = 12\nseeds = [0]"), "other")
+    assert run_cli("study", "run", str(path), "--name", "mini") == 2
+    assert "study 'mini' exists with a different plan" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_plans_parse_and_build_a_graph(name):
+    plan = load_plan(name)
+    assert plan.name == name
+    base = [BaseSource(d.name, 1 / len(plan.base_data.datasets), None, d.episodes,
+                       {"shift": d.shift, "policy": d.policy, "policy_ref": d.policy, "episodes": d.episodes,
+                        "seed": d.seed, "epsilon": 0.0, "batch": 8}) for d in plan.base_data.datasets]
+    units = build_units(plan, name, base)
+    graph = unit_graph(units)
+    names = order(graph)
+    assert names.index(f"base-data:{plan.base_data.datasets[0].name}") < names.index(
+        next(n for n in names if n.startswith("train:")))
+    if name != "tiny":
+        assert plan.base_data.source == "checkpoint" and plan.base_data.verify is False  # see the plans' comment
+        assert {d.name for d in plan.base_data.datasets} == {"grasp-base-oracle", "grasp-base-noisy",
+                                                            "grasp-base-random"}
+    if name in ("full", "paper"):
+        assert plan.collect.episodes == 800 and plan.finetune.tiers == (25, 50, 100, 200, 400, 800)
+        assert len(plan.shifts) == 5 and len(plan.continual.sequence) == 5
