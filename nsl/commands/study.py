@@ -4,31 +4,32 @@ from __future__ import annotations
 
 import argparse
 
+from nsl.commands._options import add_json, add_parser, add_workers
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "study", help="run the whole study from a plan (resumable), show its progress, write its report",
+    p = add_parser(
+        sub, "study", help="run the whole study from a plan (resumable), show its progress, write its report",
         description="A study is a TOML plan (shipped: tiny, small, full, paper) run as a graph of collection, "
                     "training and evaluation units. Finished units are skipped, so running the same command "
                     "again resumes a killed study. Files go to $NSL_HOME/studies/NAME/.")
     ss = p.add_subparsers(dest="study_command", metavar="ACTION")
-    r = ss.add_parser("run", help="run (or resume) a study", description="Run every unit of PLAN not done yet, "
+    r = add_parser(ss, "run", help="run (or resume) a study", description="Run every unit of PLAN not done yet, "
                       "then write the report.")
     r.add_argument("plan", help="a shipped plan (tiny, small, full, paper) or a path to a TOML plan")
     r.add_argument("--name", default=None, help="study name (default: the plan's name)")
-    r.add_argument("--workers", type=int, default=1,
-                   help="units run at once, each in its own process (default 1: one unit at a time, using every "
-                        "core; results are reproducible for the same --workers)")
+    add_workers(r, help="units run at once, each in its own process (1: one unit at a time, using every core; "
+                        "results are reproducible for the same --workers)")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
     r.add_argument("--estimate", action="store_true",
                    help="check the plan and print the estimated time of the units left, then stop")
     r.set_defaults(func=_run)
-    s = ss.add_parser("status", help="units done, running and left, with the time spent")
-    s.add_argument("name")
-    s.add_argument("--json", action="store_true", help="print the status record as JSON")
+    s = add_parser(ss, "status", help="units done, running and left, with the time spent")
+    s.add_argument("name", help="the study's name (its folder under $NSL_HOME/studies)")
+    add_json(s, "the status record")
     s.set_defaults(func=_status)
-    w = ss.add_parser("report", help="write report.md and PNG plots under $NSL_HOME/studies/NAME/")
-    w.add_argument("name")
+    w = add_parser(ss, "report", help="write report.md and PNG plots under $NSL_HOME/studies/NAME/")
+    w.add_argument("name", help="the study's name (its folder under $NSL_HOME/studies)")
     w.set_defaults(func=_report)
     p.set_defaults(func=lambda args: p.print_help() or 1)
 
@@ -52,7 +53,7 @@ def _status(args: argparse.Namespace) -> int:
     from nsl.study import status_lines, study_status
 
     status = study_status(args.name)
-    print(json.dumps(status, indent=2, sort_keys=True) if args.json else "\n".join(status_lines(status)))
+    print(json.dumps(status, sort_keys=True) if args.json else "\n".join(status_lines(status)))
     return 0
 
 

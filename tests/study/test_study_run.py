@@ -59,8 +59,8 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
         ft = cat.resolve_checkpoint("ckpt:mini-ft-harsh-lighting-n8-k10-s0@latest")
         e = next(x for x in cat.evaluations(ft.id, "harsh_lighting") if x.episodes == 4)
         assert ft.step == 10 and ft.parent == base_id
-        assert [(d.dataset, d.tier) for d in ft.data] == [("mini-base-oracle", "12"),
-                                                          ("mini-harsh-lighting-by-base", "8")]
+        assert [(d.dataset, d.tier) for d in ft.data] == [("mini-base-oracle", 12),
+                                                          ("mini-harsh-lighting-by-base", 8)]
     assert tiers[0][4].startswith(f"{round(100 * e.successes / 4)}%")
     # tiers are nested views of one 8-episode collection by the base policy, with the plan's epsilon
     v = api.open_version("mini-harsh-lighting-by-base")
