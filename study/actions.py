@@ -1,14 +1,10 @@
 """The study's adapter to the library: run one unit, tell whether its output exists, find the base data.
 
-Units call the folders' public functions directly (no argparse, no
-``nsl.cli``).  Where a command module holds the call sequence rather than a
-library function, the minimal sequence is repeated here, marked "as in
-nsl/commands/X.py", so that it can be shared once the commands are refactored:
-
-* collecting a dataset version (``Collection.begin`` ... ``finish``, then catalogue it): ``collect.py``;
-* training from a catalogued parent with a data mix, optional simulator/offline monitor, then catalogue the
-  checkpoint (and every evaluated step): ``train.py``;
-* evaluating a checkpoint and recording the result in the catalog: ``eval.py``.
+Collection and evaluation units call the commands' own functions (``nsl.commands.collect.collect``,
+``nsl.commands.eval.evaluate``), so a unit's dataset or evaluation is exactly what ``nsl collect`` or
+``nsl eval`` would make.  Training units repeat the call sequence of ``nsl/commands/train.py`` (data mix,
+catalogued parent, a monitor whose patience outlasts the run, catalogued evaluated steps), because the
+study records every evaluated step and replays each stopping criterion afterwards.
 
 ``nsl.commands._refs`` (policy factories, dataset registration, the shipped base) is
 imported here only.
@@ -190,48 +186,17 @@ def run_unit(unit: Unit, workers: int = 1, progress: bool = True) -> dict[str, A
 
 
 def _collect(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
-    """As in nsl/commands/collect.py: begin (or resume) a collection, fill the missing episodes, publish."""
-    from tqdm import tqdm
-
-    from nsl.collectors import EnvConfig, collect_episodes
-    from nsl.datasets import api
+    """``nsl collect`` (begin or resume, fill the missing episodes, publish, catalogue), then check the hash."""
+    from nsl.commands.collect import collect
 
     p = unit.params
-    env_config = EnvConfig(shift=p["shift"], split="train", image_size=IMAGE_SIZE)
-    make_policy = _resolve().policy_factory(p["policy_ref"], env_config, epsilon=p["epsilon"])
-    spec = {"env": env_config.to_dict(), "policy": make_policy().describe(), "policy_ref": p["policy_ref"],
-            "seed": p["seed"]}
-    coll = api.Collection.begin(p["dataset"], p["episodes"], spec, IMAGE_SIZE, EPISODES_PER_FILE)
-    if not coll.up_to_date:
-        missing = coll.missing_indices()
-        started = time.perf_counter()
-        if missing:
-            episodes = collect_episodes(env_config, make_policy, missing, seed=p["seed"], workers=workers,
-                                        batch=p["batch"])
-            bar = tqdm(total=len(missing), unit="ep", desc=f"collect {p['dataset']}", disable=not progress,
-                       leave=False, dynamic_ncols=True)
-            try:
-                for k, ep in enumerate(episodes):
-                    if ep.index != missing[k]:
-                        raise RuntimeError(f"collector returned episode {ep.index}, expected {missing[k]}")
-                    coll.add(ep)
-                    bar.update(1)
-            finally:
-                episodes.close()
-                bar.close()
-        version = coll.finish(created={"command": f"nsl study unit {unit.name}", "workers": workers,
-                                       "batch": p["batch"], "collect_seconds": round(time.perf_counter() - started, 2),
-                                       "config": dict(p)})
-    else:
-        version = coll.parent
+    version = collect(shift=p["shift"], episodes=p["episodes"], policy=p["policy_ref"], data=p["dataset"],
+                      workers=workers, seed=p["seed"], batch_size=p["batch"], image_size=IMAGE_SIZE,
+                      episodes_per_file=EPISODES_PER_FILE, epsilon=p["epsilon"])
     if p.get("expect_hash") and version.hash != p["expect_hash"]:
         raise CorruptDataError(
             f"dataset {version.ref} collected again has hash {version.hash[:19]}..., but the base checkpoint records "
             f"{p['expect_hash'][:19]}...; the simulator or recipe changed since the base was trained")
-    from nsl.catalog import Catalog
-
-    with Catalog() as cat:
-        _resolve().register_dataset(cat, version)
     return {"dataset": version.ref, "hash": version.hash, "episodes": version.num_episodes,
             "success_rate": float(version.episodes.success.mean())}
 
@@ -351,21 +316,11 @@ def _register_evaluated(cat, name: str, run_dir: Path, parent, uses, shift: str,
 
 
 def _evaluate(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
-    """As in nsl/commands/eval.py: success with a Wilson interval on test objects, stored in the catalog."""
-    from nsl import code_version
-    from nsl.catalog import Catalog
-    from nsl.collectors import EnvConfig, parse_shift
-    from nsl.eval import EvalConfig, evaluate
+    """``nsl eval``: success with a Wilson interval on test objects, stored in the catalog."""
+    from nsl.commands.eval import evaluate
 
     p = unit.params
-    resolve = _resolve()
-    config = EvalConfig(episodes=p["episodes"], seed=p["seed"], workers=workers, batch=8)
-    make = resolve.policy_factory(p["checkpoint_ref"], EnvConfig())
-    r = evaluate(make, [parse_shift(p["shift"])], config, progress=progress)[parse_shift(p["shift"]).name]
-    with Catalog() as cat:
-        entry = resolve.resolve_init(cat, p["checkpoint_ref"])
-        cat.add_evaluation(entry.id, p["shift"], episodes=r.episodes, successes=r.successes, seed=config.seed,
-                           split=config.split, ci=r.ci,
-                           extra={"source": "study", "unit": unit.name, "eval": config.to_dict(),
-                                  "code_version": code_version()})
+    result = evaluate([p["checkpoint_ref"]], shift=p["shift"], episodes=p["episodes"], seed=p["seed"],
+                      workers=workers, batch_size=8, progress=progress, source="study")
+    (r,) = result["table"][p["checkpoint_ref"]].values()
     return {"successes": r.successes, "episodes": r.episodes}
