@@ -84,3 +84,23 @@ def test_unknown_checkpoint_is_a_clear_error(home, monkeypatch, capsys):
     monkeypatch.setenv("NSL_HOME", str(home))
     assert _script().main(["--checkpoint", "nothing-here", "--data", "d-base"]) == 2
     assert "ckpt:NAME" in capsys.readouterr().err
+
+
+def test_shrink_perturb_option_is_recorded_and_checked(home, monkeypatch, capsys):
+    from nsl import workspace
+
+    monkeypatch.setenv("NSL_HOME", str(home))
+    assert run_cli("train", "--init", "ckpt:tiny", "--data", "d-harsh", "--steps", "1", "--name", "tiny-sp",
+                   "--batch-size", "8", "--shrink-perturb", "0.5,0.02") == 0
+    run = json.loads((workspace.runs_dir() / "tiny-sp" / "run.json").read_text())
+    assert run["training"]["shrink_perturb"] == [0.5, 0.02]
+    command = json.loads((workspace.runs_dir() / "tiny-sp" / "command.json").read_text())
+    assert command["options"]["shrink_perturb"] == "0.5,0.02"
+    capsys.readouterr()
+    assert run_cli("train", "--init", "ckpt:tiny", "--data", "d-harsh", "--steps", "1", "--name", "tiny-sp2",
+                   "--shrink-perturb", "0.5") != 0
+    assert "write ALPHA,SIGMA" in capsys.readouterr().err
+    assert run_cli("train", "--data", "d-harsh", "--steps", "1", "--name", "tiny-sp3",
+                   "--shrink-perturb", "0.5,0.1") != 0
+    assert "give --init" in capsys.readouterr().err
+    assert not (workspace.runs_dir() / "tiny-sp3").exists()
