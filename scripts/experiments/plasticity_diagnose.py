@@ -10,6 +10,8 @@ given and every dataset given, on (up to ``--transitions``) transitions of the d
   target networks), and the Monte-Carlo discounted returns of the data; ``optimism`` = mean target - mean return
   (positive: the checkpoint promises more than the data's episodes delivered); the mean |Q - target| (the size
   of the log-loss gradient on the logit) and the first frames' V(s0) = max_a Q against the data's success rate;
+* ``action_spread``: the standard deviation of the logit over 32 uniform random actions, averaged over states (how
+  much Q depends on the action at all), and the gap between CEM's best logit and the data action's;
 * ``auc``: how well Q(s, a) ranks transitions of successful episodes above those of failed ones (0.5 = chance);
 * ``dormant``: per layer (conv0-3 and the head's hidden layers), the share of units whose mean |activation| is at
   most tau times the layer's mean (Sokar et al. 2023), for tau in ``--tau``;
@@ -144,7 +146,7 @@ def measure(net, data: dict, cfg: TrainConfig, taus: list[float], seed: int) -> 
     """Every per-dataset measurement of one network (see the module docstring)."""
     gen = torch.Generator().manual_seed(seed)
     n = len(data["reward"])
-    logits, max_logits, targets = [], [], []
+    logits, max_logits, targets, spreads = [], [], [], []
     conv_abs: list[list[torch.Tensor]] = []
     head_abs: list[list[torch.Tensor]] = []
     flats, lasts = [], []
@@ -164,6 +166,8 @@ def measure(net, data: dict, cfg: TrainConfig, taus: list[float], seed: int) -> 
             ctx = net.encode(image, state)
             _, best_logit = cem_maximize(lambda cand: net.score(ctx, cand),
                                          noise_from_generator(b, action.shape[1], cfg.cem, gen), cfg.cem)
+            rand = torch.rand(b, 32, action.shape[1], generator=gen) * 2.0 - 1.0
+            spreads.append(net.score(ctx, rand).std(dim=1))
         out = forward(net, image, state, action)
         loss = F.binary_cross_entropy_with_logits(out["logit"], target, reduction="sum") / n
         loss.backward()  # the chunks' gradients add up to the gradient of the mean loss over all n transitions
@@ -218,6 +222,8 @@ def measure(net, data: dict, cfg: TrainConfig, taus: list[float], seed: int) -> 
                    "abs_q_minus_target": float(np.abs(q - target).mean()),
                    "v0_mean": float(v0.mean()), "success_rate": float(data["success_rate"]),
                    "v0_on_failures": float(v0[~data["first_success"]].mean()) if (~data["first_success"]).any() else None},
+        "action_spread": {"logit_std_over_actions": float(torch.cat(spreads).mean()),
+                          "best_minus_data_logit": float((best - logit).mean())},
         "auc": auc,
         "dormant": {name: dormant(s, taus) for name, s in layers.items()},
         "rank": {"trunk": ranks(torch.cat(flats).numpy()), "head_last": ranks(torch.cat(lasts).numpy())},

@@ -58,6 +58,7 @@ def test_measurements_have_every_key_in_range(home, monkeypatch, tmp_path):
             for k in ("q_mean", "target_mean", "return_mean", "v0_mean", "success_rate"):
                 assert 0.0 <= v[k] <= 1.0, k
             assert v["optimism"] == pytest.approx(v["target_mean"] - v["return_mean"])
+            assert m["action_spread"]["logit_std_over_actions"] > 0
             assert m["auc"] is None or 0.0 <= m["auc"] <= 1.0
             assert set(m["dormant"]) == {"conv0", "conv1", "conv2", "conv3", "head0", "head1"}
             for layer in m["dormant"].values():
