@@ -53,7 +53,6 @@ finetune ft-offset25-s1 tgt-offset25 offset_gripper@0.25 --seed 1
 finetune ft-offset25-cons-s1 tgt-offset25 offset_gripper@0.25 --conservative 0.3 --seed 1
 # the conservative fine-tune on the other shifts, and its control without target data
 finetune ft-transp60-cons tgt-transp60 transparent_objects@0.6 --conservative 0.3
-finetune ft-harsh-cons tgt-harsh harsh_lighting --conservative 0.3
 $NSL train --init ckpt:base --steps 1500 --data grasp-base-oracle=0.5 --data grasp-base-noisy=0.25 \
   --data grasp-base-random=0.25 --name ft-baseonly-cons --conservative 0.3
 evaluate ckpt:ft-baseonly-cons@latest offset_gripper@0.25,transparent_objects@0.6,base ft-baseonly-cons
@@ -70,5 +69,11 @@ $PY scripts/experiments/plasticity_diagnose.py --checkpoint ckpt:base --checkpoi
   --checkpoint ckpt:ft-baseonly@latest --data grasp-base-oracle:400 --data tgt-transp60 --transitions 1000 \
   --out "$OUT/diag-transp60.json"
 $PY scripts/experiments/plasticity_diagnose.py --checkpoint ckpt:base --checkpoint ckpt:ft-harsh@latest \
-  --checkpoint ckpt:ft-harsh-cons@latest --data grasp-base-oracle:400 --data tgt-harsh --transitions 1000 \
-  --out "$OUT/diag-harsh.json"
+  --data grasp-base-oracle:400 --data tgt-harsh --transitions 1000 --out "$OUT/diag-harsh.json"
+# paired comparisons (McNemar)
+$NSL eval --checkpoint ckpt:ft-offset25@latest,ckpt:ft-baseonly@latest --shift offset_gripper@0.25,base \
+  --episodes 200 --workers 2 --seed 3000
+$NSL eval --checkpoint ckpt:ft-offset25-cons@latest,ckpt:ft-offset25@latest --shift offset_gripper@0.25,base \
+  --episodes 200 --workers 2 --seed 3000
+$NSL eval --checkpoint ckpt:ft-offset25-cons@latest,ckpt:ft-baseonly-cons@latest --shift offset_gripper@0.25 \
+  --episodes 200 --workers 2 --seed 3000
