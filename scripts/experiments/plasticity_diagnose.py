@@ -33,7 +33,6 @@ JSON goes to ``--out`` (written under a temporary name, then renamed) and a shor
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
