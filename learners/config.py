@@ -145,6 +145,8 @@ class TrainConfig:
     cem: CemConfig = field(default_factory=CemConfig)  # action maximisation for the Bellman target
     conservative: float = 0.0  # weight of scoring uniform random actions as failures (keeps unseen actions down); 0 disables
     conservative_samples: int = 16  # uniform random actions per state for that term
+    shrink_perturb: tuple[float, float] | None = None  # (alpha, sigma): fine-tuning starts from alpha * parent +
+    # sigma * a fresh initialisation (Ash and Adams 2020); None keeps the parent's weights
     augment_crop: int = 4  # random-shift augmentation: pad by this many pixels and crop back; 0 disables
     augment_colour: float = 0.1  # colour jitter strength (brightness, contrast, per-channel gain); 0 disables
     seed: int = 0
@@ -175,6 +177,13 @@ class TrainConfig:
         if self.conservative < 0 or self.conservative_samples < 1:
             raise ConfigError(f"conservative {self.conservative} must be >= 0 and conservative_samples "
                               f"{self.conservative_samples} >= 1")
+        if self.shrink_perturb is not None:
+            sp = _tuple(self.shrink_perturb)
+            if (not isinstance(sp, tuple) or len(sp) != 2 or not all(isinstance(v, (int, float)) for v in sp)
+                    or not 0 < sp[0] <= 1 or sp[1] < 0):
+                raise ConfigError(f"shrink_perturb {sp!r} must be (alpha, sigma) with 0 < alpha <= 1 and sigma >= 0, "
+                                  "e.g. (0.8, 0.01)")
+            object.__setattr__(self, "shrink_perturb", (float(sp[0]), float(sp[1])))
         if self.keep_trainer_state < 1:
             raise ConfigError(f"keep_trainer_state {self.keep_trainer_state} must be at least 1 (resume needs one)")
 

@@ -197,6 +197,23 @@ def reinit_head(net: QNetwork) -> None:
         m.reset_parameters()
 
 
+@torch.no_grad()
+def shrink_perturb(net: QNetwork, alpha: float, sigma: float, seed: int) -> None:
+    """Shrink and perturb (Ash and Adams 2020): w <- alpha * w + sigma * w_init for every trainable parameter.
+
+    ``w_init`` is a fresh initialisation of the same architecture drawn from ``seed`` (so the noise has each
+    layer's own initial scale); frozen columns are left as they are.
+    """
+    gen_state = torch.get_rng_state()
+    torch.manual_seed(seed)
+    fresh = QNetwork(net.cfg)
+    torch.set_rng_state(gen_state)
+    for (name, p), (fresh_name, q) in zip(net.named_parameters(), fresh.named_parameters()):
+        assert name == fresh_name, (name, fresh_name)
+        if p.requires_grad:
+            p.mul_(alpha).add_(q, alpha=sigma)
+
+
 def grow_column(parent: QNetwork, copy_last: bool) -> QNetwork:
     """A progressive network: ``parent``'s columns, frozen, plus one new trainable column.
 

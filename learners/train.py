@@ -18,6 +18,9 @@ Methods (``init_checkpoint`` is the parent):
 * ``pnn``: a progressive network: the parent's columns frozen plus a new column with lateral connections;
 * ``ft_pnn``: the same, with the new column initialised from the parent's last column.
 
+With ``TrainConfig.shrink_perturb = (alpha, sigma)`` the starting network's trainable weights become
+``alpha * w + sigma * w_init`` (Ash and Adams 2020), ``w_init`` a fresh initialisation drawn from ``seed + 1``.
+
 The learning rate defaults to 3e-4 from scratch and to 25% of the parent's
 when fine-tuning.  Running the same call again after a crash or kill resumes
 from the newest checkpoint and, on the same machine and thread count, ends
@@ -47,7 +50,7 @@ from nsl.workspace import atomic_write_bytes
 from .checkpoint import (Checkpoint, checkpoint_config, checkpoint_id, load_checkpoint, load_trainer_state,
                          save_checkpoint, write_json, TRAINER_FILE)
 from .config import FINE_TUNE_LR_FACTOR, METHODS, NetConfig, TrainConfig
-from .networks import QNetwork, grow_column, reinit_head
+from .networks import QNetwork, grow_column, reinit_head, shrink_perturb
 from .policy import CEMPolicy
 from .qtopt import Learner, batch_to_torch, update
 from .sampler import Sampler
@@ -125,6 +128,12 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
     lr = resolve_lr(config, method, parent)
     resolved = config.replace(lr=lr)
     model = initial_network(method, parent, net or (None if parent else NetConfig()), config.seed)
+    if config.shrink_perturb is not None:
+        if parent is None or method == "scratch":
+            raise ConfigError("shrink_perturb changes a parent's weights; use it with init_checkpoint and a "
+                              "fine-tuning method (not scratch)")
+        alpha, sigma = config.shrink_perturb
+        shrink_perturb(model, alpha, sigma, seed=config.seed + 1)
     parent_info = None if parent is None else {"id": checkpoint_id(parent.path), "path": str(parent.path),
                                                "step": parent.step, "method": parent.config["method"]}
     run = {"training": resolved.to_dict(), "method": method, "parent": parent_info,

@@ -49,6 +49,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--conservative", type=float, default=0.0, metavar="ALPHA",
                    help="weight of scoring random actions as failures, which keeps offline Q values of unseen "
                         "actions down (0 = plain QT-Opt)")
+    p.add_argument("--shrink-perturb", default=None, metavar="ALPHA,SIGMA",
+                   help="with --init: start from ALPHA * the parent's weights + SIGMA * a fresh initialisation "
+                        "(shrink and perturb, Ash and Adams 2020), e.g. 0.8,0.01; recorded in the run's config")
     p.add_argument("--n-step", type=int, default=1, metavar="N",
                    help="n-step returns: bootstrap after up to N steps of the data's own actions, so fewer "
                         "Bellman maximisations stack up offline")
@@ -95,6 +98,21 @@ def _parse_data(specs: list[str]) -> list[tuple[str, float | None]]:
     return [(r, 1.0 / len(out) if w is None else w) for r, w in out]
 
 
+def _parse_shrink_perturb(spec: str | None, init: str | None) -> tuple[float, float] | None:
+    """``"0.8,0.01"`` -> (0.8, 0.01); None stays None."""
+    if spec is None:
+        return None
+    from nsl.errors import ConfigError
+
+    if not init:
+        raise ConfigError("--shrink-perturb changes a parent's weights; give --init CKPT as well")
+    try:
+        alpha, sigma = (float(v) for v in spec.split(","))
+    except ValueError:
+        raise ConfigError(f"--shrink-perturb {spec!r}: write ALPHA,SIGMA, e.g. 0.8,0.01") from None
+    return alpha, sigma
+
+
 def _parse_net(specs: list[str]):
     """``["pool=spatial", "hidden=32"]`` -> a NetConfig (None when empty); values take the field's type."""
     if not specs:
@@ -130,18 +148,19 @@ def run(args: argparse.Namespace) -> int:
     train(data=args.data, steps=args.steps, name=args.name, init=args.init, method=args.method, lr=args.lr,
           lr_decay=args.lr_decay, weight_decay=args.weight_decay, batch_size=args.batch_size, seed=args.seed,
           checkpoint_every=args.checkpoint_every, no_augment=args.no_augment, conservative=args.conservative,
-          n_step=args.n_step, crop=args.crop, net=args.net, eval_every=args.eval_every,
-          eval_episodes=args.eval_episodes, base_episodes=args.base_episodes, target_shift=args.target_shift,
-          patience=args.patience, criterion=args.criterion, holdout=args.holdout, workers=args.workers)
+          n_step=args.n_step, shrink_perturb=args.shrink_perturb, crop=args.crop, net=args.net,
+          eval_every=args.eval_every, eval_episodes=args.eval_episodes, base_episodes=args.base_episodes,
+          target_shift=args.target_shift, patience=args.patience, criterion=args.criterion, holdout=args.holdout,
+          workers=args.workers)
     return 0
 
 
 def train(*, data: list[str], steps: int, name: str, init: str | None = None, method: str | None = None,
           lr: float | None = None, lr_decay: int = 0, weight_decay: float = 0.0, batch_size: int = 64, seed: int = 0,
           checkpoint_every: int = 2000, no_augment: bool = False, conservative: float = 0.0, n_step: int = 1,
-          crop: int | None = None, net: list[str] = (), eval_every: int = 0, eval_episodes: int = 50,
-          base_episodes: int = 0, target_shift: str | None = None, patience: int = 5, criterion: str = "eval",
-          holdout: float = 0.1, workers: int = 1):
+          shrink_perturb: str | None = None, crop: int | None = None, net: list[str] = (), eval_every: int = 0,
+          eval_episodes: int = 50, base_episodes: int = 0, target_shift: str | None = None, patience: int = 5,
+          criterion: str = "eval", holdout: float = 0.1, workers: int = 1):
     """Train (or resume) run ``name`` and catalogue its checkpoints; returns the final CheckpointEntry.
 
     The keyword arguments are those of ``nsl train`` (``data`` holds the
@@ -160,6 +179,7 @@ def train(*, data: list[str], steps: int, name: str, init: str | None = None, me
     if criterion not in CRITERIA:
         raise ConfigError(f"--criterion {criterion!r} is unknown; use one of {', '.join(CRITERIA)}")
     mix = _parse_data(list(data))
+    sp = _parse_shrink_perturb(shrink_perturb, init)
     net_config = _parse_net(list(net))
     if net_config is not None and init:
         raise ConfigError("--net sets the architecture of a new network; with --init the parent's is kept "
@@ -182,7 +202,7 @@ def train(*, data: list[str], steps: int, name: str, init: str | None = None, me
     config = TrainConfig(steps=steps, batch_size=batch_size, lr=lr, seed=seed,
                          checkpoint_every=checkpoint_every, eval_every=eval_every,
                          conservative=conservative, n_step=n_step, lr_decay=lr_decay,
-                         weight_decay=weight_decay,
+                         weight_decay=weight_decay, shrink_perturb=sp,
                          **({"augment_crop": 0, "augment_colour": 0.0} if no_augment else {}),
                          **({"augment_crop": crop} if crop is not None and not no_augment else {}))
     sampler = api.make_sampler(sources, n_step=config.n_step, gamma=config.gamma)
@@ -215,8 +235,9 @@ def train(*, data: list[str], steps: int, name: str, init: str | None = None, me
 
 
 TRAIN_OPTIONS = ("data", "steps", "name", "init", "method", "lr", "lr_decay", "weight_decay", "batch_size", "seed",
-                 "checkpoint_every", "no_augment", "conservative", "n_step", "crop", "net", "eval_every",
-                 "eval_episodes", "base_episodes", "target_shift", "patience", "criterion", "holdout", "workers")
+                 "checkpoint_every", "no_augment", "conservative", "n_step", "shrink_perturb", "crop", "net",
+                 "eval_every", "eval_episodes", "base_episodes", "target_shift", "patience", "criterion", "holdout",
+                 "workers")
 
 
 def _check_env_version(view) -> None:

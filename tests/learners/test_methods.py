@@ -137,3 +137,27 @@ def test_reinit_head_redraws_exactly_the_head_parameters_of_the_last_column():
     expected = {k for k in before if k.startswith(last) and is_head_parameter(k)}
     assert changed == expected and any(".lateral." in k for k in changed)
     assert not any(k.startswith("columns.0.") for k in changed)
+
+
+def test_shrink_perturb_starts_from_alpha_parent_plus_sigma_fresh_init(parent_checkpoint, tmp_path):
+    cfg = tiny_train(steps=0, shrink_perturb=(0.8, 0.01))
+    result = train(cfg, TARGET, tmp_path / "sp", init_checkpoint=parent_checkpoint, progress=False)
+    parent, child = _weights(parent_checkpoint), _weights(result.checkpoint)
+    arch = load_checkpoint(parent_checkpoint).net.cfg  # loading draws an initialisation too: before the seed
+    torch.manual_seed(cfg.seed + 1)
+    fresh = QNetwork(arch).state_dict()
+    for k in parent:
+        assert torch.allclose(child[k], 0.8 * parent[k] + 0.01 * fresh[k], atol=1e-7), k
+    assert load_checkpoint(result.checkpoint).config["training"]["shrink_perturb"] == [0.8, 0.01]
+    # alpha 1, sigma 0 is the parent itself
+    same = train(tiny_train(steps=0, shrink_perturb=(1.0, 0.0)), TARGET, tmp_path / "same",
+                 init_checkpoint=parent_checkpoint, progress=False)
+    assert all(torch.equal(parent[k], v) for k, v in _weights(same.checkpoint).items())
+
+
+def test_shrink_perturb_is_refused_without_a_parent_or_with_bad_values(tmp_path):
+    with pytest.raises(ConfigError, match="init_checkpoint"):
+        train(tiny_train(steps=0, shrink_perturb=(0.8, 0.01)), TARGET, tmp_path / "x", net=TINY_NET, progress=False)
+    for bad in ((0.0, 0.01), (1.5, 0.0), (0.8, -1.0), (0.8,)):
+        with pytest.raises(ConfigError, match="shrink_perturb"):
+            tiny_train(shrink_perturb=bad)
