@@ -192,7 +192,7 @@ def _collect(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
     p = unit.params
     version = collect(shift=p["shift"], episodes=p["episodes"], policy=p["policy_ref"], data=p["dataset"],
                       workers=workers, seed=p["seed"], batch_size=p["batch"], image_size=IMAGE_SIZE,
-                      episodes_per_file=EPISODES_PER_FILE, epsilon=p["epsilon"])
+                      episodes_per_file=EPISODES_PER_FILE, epsilon=p["epsilon"], progress=progress)
     if p.get("expect_hash") and version.hash != p["expect_hash"]:
         raise CorruptDataError(
             f"dataset {version.ref} collected again has hash {version.hash[:19]}..., but the base checkpoint records "

@@ -99,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
 
 def collect(*, shift: str, episodes: int, policy: str, data: str, workers: int = 1, seed: int = 0,
             batch_size: int = 1, split: str = "train", image_size: int = 64, episodes_per_file: int = 100,
-            epsilon: float = 0.0, restart: bool = False, stop_after_files: int = 0, cluster: str | None = None):
+            epsilon: float = 0.0, restart: bool = False, stop_after_files: int = 0, cluster: str | None = None,
+            progress: bool = True):
     """Collect ``episodes`` episodes into dataset ``data`` (resuming or appending); returns its DatasetVersion.
 
     The keyword arguments are those of ``nsl collect`` (``cluster`` None: ``$NSL_CLUSTER`` or local
@@ -133,7 +134,7 @@ def collect(*, shift: str, episodes: int, policy: str, data: str, workers: int =
     from nsl.cluster import open_executor
 
     with open_executor(cluster) as ex:  # local processes, or chunks as Ray tasks (same episodes)
-        _collect(coll, cfg, env_config, make_policy, missing, stop_after_files,
+        _collect(coll, cfg, env_config, make_policy, missing, stop_after_files, progress,
                  functools.partial(collect_episodes, runner=ex.runner))
     version = coll.finish(created={
         "command": "nsl collect " + shlex.join(_argv(cfg)), "workers": cfg.workers, "batch_size": cfg.batch_size,
@@ -147,7 +148,7 @@ def collect(*, shift: str, episodes: int, policy: str, data: str, workers: int =
     return version
 
 
-def _collect(coll, cfg: CollectConfig, env_config, make_policy, missing: list[int], stop_after: int,
+def _collect(coll, cfg: CollectConfig, env_config, make_policy, missing: list[int], stop_after: int, progress: bool,
              collect_episodes) -> None:
     from tqdm import tqdm
 
@@ -155,7 +156,7 @@ def _collect(coll, cfg: CollectConfig, env_config, make_policy, missing: list[in
         return
     episodes = collect_episodes(env_config, make_policy, missing, seed=cfg.seed, workers=cfg.workers,
                                 batch=cfg.batch_size)
-    bar = tqdm(total=len(missing), unit="ep", desc=f"collect {cfg.data}", dynamic_ncols=True)
+    bar = tqdm(total=len(missing), unit="ep", desc=f"collect {cfg.data}", dynamic_ncols=True, disable=not progress)
     successes = files = 0
     try:
         for k, ep in enumerate(episodes):
