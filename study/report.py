@@ -561,7 +561,7 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
              + ("" if plan['base_data'].get('verify', True) or plan['base_data']['source'] != 'checkpoint'
                 else " (**hashes not checked**: base_data.verify = false)") + ".", "",
              f"Units done: {done} of {len(units)}; time spent in units: {seconds / 60:.1f} minutes.",
-             "Every 'study' figure is the real-robot result of the source study (NOTES.md, Tables 5.1-5.3); ours are "
+             "Every 'study' figure is the real-robot result of the source study (Never Stop Learning, Tables 5.1-5.3); ours are "
              "simulation, with 95% Wilson intervals (differences: Newcombe intervals).", "",
              "## Findings", "", findings_table(findings(records)), "",
              "## Challenge table (Table 5.1)", "", challenge_table(records), "",
