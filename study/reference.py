@@ -1,7 +1,7 @@
 """The source study's real-robot figures, which every table of the report puts beside ours.
 
 Source: the "Never Stop Learning" chapter (Ch. 5) of the 2021 dissertation the
-project reproduces, (the Never Stop Learning chapter of the source dissertation):
+project reproduces:
 Table 5.1 (challenge tasks: base-policy success and change against 86%),
 Table 5.2 (fine-tuning by number of target attempts, N >= 50 evaluations per
 cell) and Table 5.3 (the continual sequence).  Success in percent.  The
