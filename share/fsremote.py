@@ -10,7 +10,6 @@ stores (S3, GCS, Azure) make each object visible only when it is complete.
 
 from __future__ import annotations
 
-import json
 import posixpath
 import re
 import uuid
@@ -19,9 +18,9 @@ from typing import Any
 
 import fsspec
 
-from nsl.errors import ConfigError, CorruptDataError, EnvironmentSetupError, NslError
+from nsl.errors import ConfigError, EnvironmentSetupError, NslError
 
-from .remotes import Location
+from .remotes import Location, json_object
 
 
 class FsRemote:
@@ -68,14 +67,7 @@ class FsRemote:
         data = self.read_bytes(rel)
         if data is None:
             return None
-        try:
-            out = json.loads(data)
-        except (UnicodeDecodeError, json.JSONDecodeError):
-            raise CorruptDataError(f"{self.url}: file {rel} is not valid JSON; the remote is damaged, "
-                                   "push it again") from None
-        if not isinstance(out, dict):
-            raise CorruptDataError(f"{self.url}: file {rel} does not hold a JSON object; push it again")
-        return out
+        return json_object(data, f"{self.url}: file {rel}")
 
     def sizes(self, rel_dir: str = "") -> dict[str, int]:
         """``{relative path: size}`` of every file under ``rel_dir`` (one listing)."""

@@ -10,7 +10,6 @@ prior ``hf auth login``); nsl never reads, prints or stores it.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import shutil
@@ -23,9 +22,9 @@ from huggingface_hub.errors import (
     RevisionNotFoundError,
 )
 
-from nsl.errors import ConfigError, CorruptDataError, UnknownReferenceError
+from nsl.errors import ConfigError, UnknownReferenceError
 
-from .remotes import Location
+from .remotes import Location, json_object
 
 SHA_RE = re.compile(r"[0-9a-f]{40}")
 
@@ -106,14 +105,8 @@ class HubRemote:
                 return None
             except (HfHubHTTPError, OSError) as e:
                 raise self._fail(f"reading {rel}", e) from None
-            try:
-                out = json.loads(Path(path).read_text())
-            except (UnicodeDecodeError, json.JSONDecodeError):
-                raise CorruptDataError(f"{self.url}: file {rel} at {revision[:12]} is not valid JSON; "
-                                       "push again") from None
-        if not isinstance(out, dict):
-            raise CorruptDataError(f"{self.url}: file {rel} at {revision[:12]} does not hold a JSON object")
-        return out
+            data = Path(path).read_bytes()
+        return json_object(data, f"{self.url}: file {rel} at {revision[:12]}")
 
     def fetch(self, rel: str, dest: Path, revision: str) -> None:
         """Download ``rel`` at ``revision`` to the local file ``dest``; FileNotFoundError if absent."""

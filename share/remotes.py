@@ -48,6 +48,21 @@ class Location:
         return self.url + (f"@{self.revision}" if self.revision else "")
 
 
+def json_object(data: str | bytes, where: str) -> dict:
+    """A remote JSON file's object; ``where`` names the file in the one-line error for damaged content."""
+    import json
+
+    from nsl.errors import CorruptDataError
+
+    try:
+        out = json.loads(data)
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        raise CorruptDataError(f"{where} is not valid JSON; the remote is damaged, push it again") from None
+    if not isinstance(out, dict):
+        raise CorruptDataError(f"{where} does not hold a JSON object; push it again")
+    return out
+
+
 def parse_remote(text: str) -> Location:
     """Parse a remote address (see the module docstring); malformed ones raise ConfigError."""
     if not isinstance(text, str) or not text.strip():
