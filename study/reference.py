@@ -56,3 +56,9 @@ EARLY_STOP = "success peaks near 500k steps, then collapses below the base polic
 STUDY_DROPS = {s: BASE_TASK - v for s, v in CHALLENGE.items()}  # 10-55 points
 STUDY_MEAN_GAIN_800 = 27  # points, mean over the five shifts of (800-attempt fine-tune - base policy)
 STUDY_REACHED_BASE = ("checkerboard_backing", "offset_gripper")  # 800-attempt fine-tune >= 86% ... as stated
+
+
+def study_shift(spec: str) -> str:
+    """The study's name for a plan's shift: ``offset_gripper@0.35`` -> ``offset_gripper`` (a calibrated severity
+    of the same challenge); composed shifts (``a+b``) keep their spec and have no figures in the study."""
+    return spec if "+" in spec else spec.split("@", 1)[0]

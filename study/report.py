@@ -159,7 +159,7 @@ def challenge_table(records: Mapping[str, Any]) -> str:
     for s in plan["shifts"]:
         c = count(bp.get(s))
         drop = "-" if c is None or base is None else points(c, base)
-        study = ref.CHALLENGE.get(s)
+        study = ref.CHALLENGE.get(ref.study_shift(s))
         lines.append(f"| {_pretty(s)} | {'-' if c is None else c.pct()} | {drop} | "
                      f"{'-' if study is None else f'{study}%'} | "
                      f"{'-' if study is None else f'{study - ref.BASE_TASK:+d}'} |")
@@ -179,7 +179,7 @@ def tiers_table(records: Mapping[str, Any]) -> str:
         cells += ["-" if (c := pooled(row["tiers"][str(k)])) is None else c.pct() for k in tiers]
         cells += ["-" if (c := pooled(row["baselines"][m])) is None else c.pct() for m in baselines]
         lines.append("| " + " | ".join(cells) + " |")
-        study = ref.FINETUNE.get(shift)
+        study = ref.FINETUNE.get(ref.study_shift(shift))
         if study is not None:
             cells = ["", "study", f"{study['base']}%", *[f"{study[k]}%" if k in study else "-" for k in tiers],
                      *[f"{study[m]}%" if m in study else "-" for m in baselines]]
@@ -244,7 +244,7 @@ def continual_table(records: Mapping[str, Any]) -> str:
             f"| {_pretty(task)} | {'-' if own is None else own.pct()} | "
             f"{'-' if own is None or base is None else points(own, base)} | {'-' if single is None else single.pct()} | "
             f"{'-' if own is None or single is None else points(own, single)} | {'-' if final is None else final.pct()} | "
-            f"{ref.CONTINUAL.get(task, '-')}% | {ref.CONTINUAL_VS_SINGLE.get(task, 0):+d} |")
+            f"{ref.CONTINUAL.get(ref.study_shift(task), '-')}% | {ref.CONTINUAL_VS_SINGLE.get(ref.study_shift(task), 0):+d} |")
     b0, bT = count(cells[0][0]), count(cells[T][0])
     if b0 is not None and bT is not None:
         lines.append(f"| base task | {b0.pct()} (base policy) | - | - | - | {bT.pct()} ({points(bT, b0)}) | "
@@ -474,7 +474,7 @@ def plot_tiers(records: Mapping[str, Any], path: Path) -> Path:
             err = [[max(0.0, 100 * (c.rate - c.ci[0])) for _, c in pts], [max(0.0, 100 * (c.ci[1] - c.rate))
                                                                           for _, c in pts]]
             ax.errorbar(x, y, yerr=err, fmt="o-", color=colour, capsize=3, ms=4, label=_pretty(shift))
-        study = ref.FINETUNE.get(shift)
+        study = ref.FINETUNE.get(ref.study_shift(shift))
         if study is not None:
             ks = [k for k in ref.TIERS if k <= max(tiers)]
             ax.plot([0, *ks], [study["base"], *[study[k] for k in ks]], ":", color=colour, alpha=0.6)

@@ -116,3 +116,14 @@ def test_a_study_in_progress_reports_what_it_has():
     text = render(rec, None, {})
     assert "(no continual results yet)" in text and "(no early-stopping curve yet)" in text
     assert "| harsh lighting | ours | - | - | - | - |" in text
+
+
+def test_a_calibrated_severity_keeps_the_study_figures_beside_ours():
+    plan = tomllib.loads(MINI_PLAN.replace('"offset_gripper"]', '"offset_gripper@0.35"]', 1))
+    rec = records(plan=parse_plan(plan, default_name="mini").to_dict(),
+                  base_policy={"base": c(80), "harsh_lighting": c(20), "offset_gripper@0.35": c(40)})
+    rec["finetune"] = {"offset_gripper@0.35" if k == "offset_gripper" else k: v for k, v in rec["finetune"].items()}
+    row = challenge_table(rec).splitlines()[-1]
+    assert row.startswith("| offset gripper@0.35 | 40% [") and row.endswith("| 47% | -39 |")
+    tiers = tiers_table(rec).splitlines()
+    assert tiers[-1].startswith("|  | study | 43% |")  # the study's offset-gripper row under the calibrated shift
