@@ -373,7 +373,9 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
     out.append(Finding("a", "every shift costs the base policy at least 10 points", holds,
                        "drops of " + "; ".join(f"{_pretty(s)} {points(a, b)}" for s, (a, b) in measured.items())
                        if measured else "-",
-                       "drops of " + ", ".join(f"{v}" for v in ref.STUDY_DROPS.values()) + " points (10-55)"))
+                       "drops of " + "; ".join(f"{_pretty(ref.study_shift(s))} {ref.STUDY_DROPS[ref.study_shift(s)]}"
+                                               for s in plan["shifts"] if ref.study_shift(s) in ref.STUDY_DROPS)
+                       + " points (10-55)"))
     # (b) fine-tuning on the top tier gains at least the study's +27 points on average; reaches base on 2 of 5
     top = str(plan["finetune"]["tiers"][-1])
     gains, reached, parts = [], [], []

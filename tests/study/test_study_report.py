@@ -127,3 +127,5 @@ def test_a_calibrated_severity_keeps_the_study_figures_beside_ours():
     assert row.startswith("| offset gripper@0.35 | 40% [") and row.endswith("| 47% | -39 |")
     tiers = tiers_table(rec).splitlines()
     assert tiers[-1].startswith("|  | study | 43% |")  # the study's offset-gripper row under the calibrated shift
+    (a,) = [x for x in findings(rec) if x.key == "a"]
+    assert a.study.startswith("drops of harsh lighting 55; offset gripper 39 points")
