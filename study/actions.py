@@ -234,7 +234,7 @@ def _train(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
         train_view, held_out = api.episode_split(api.open_view(mix[-1][0]), monitor_cfg["holdout"])
         sources[-1] = (train_view, mix[-1][1])
     config = TrainConfig(steps=p["steps"], seed=p["seed"], checkpoint_every=min(p["checkpoint_every"], p["steps"]),
-                         eval_every=monitor_cfg["every"] if monitor_cfg else 0)
+                         eval_every=monitor_cfg["every"] if monitor_cfg else 0, lr=p.get("lr"))  # lr: None = default
     sampler = api.make_sampler(sources, n_step=config.n_step, gamma=config.gamma)
     run_dir = workspace.runs_dir() / p["checkpoint"]
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -256,7 +256,7 @@ def _monitor(shift: str, m: Mapping[str, Any], run_dir: Path, held_out, steps: i
     """As in nsl/commands/train.py: simulator success on target and base, offline scores on held-out episodes.
 
     The patience is larger than the run, so the run always trains to its last step (the study replays each
-    criterion's patience on the recorded curve afterwards).
+    criterion's patience on the recorded curve afterwards).  ``base_episodes`` 0 skips the base task.
     """
     from nsl.collectors import parse_shift
     from nsl.eval import EarlyStopConfig, EarlyStopMonitor, simulator_scorer
@@ -264,7 +264,8 @@ def _monitor(shift: str, m: Mapping[str, Any], run_dir: Path, held_out, steps: i
     cfg = EarlyStopConfig(every=m["every"], episodes=m["episodes"], base_episodes=m["base_episodes"],
                           patience=steps // m["every"] + 2, criterion="eval", seed=m["seed"],
                           held_out=m.get("holdout") or 0.1)
-    score_base = simulator_scorer(parse_shift("base"), cfg.eval_config(base=True, workers=workers))
+    score_base = (simulator_scorer(parse_shift("base"), cfg.eval_config(base=True, workers=workers))
+                  if m["base_episodes"] else None)
     return EarlyStopMonitor(cfg, run_dir, score_target=simulator_scorer(parse_shift(shift),
                                                                         cfg.eval_config(workers=workers)),
                             score_base=score_base, offline=_offline_scorer(held_out) if held_out is not None else None)

@@ -103,13 +103,14 @@ def study_status(name: str) -> dict[str, Any]:
     return status
 
 
-def status_lines(status: dict[str, Any]) -> list[str]:
+def status_lines(status: dict[str, Any], kind: str = "study") -> list[str]:
+    """The status record for a terminal (``kind``: study or transfer, the record's name key)."""
     units = status.get("units", {})
     by: dict[str, list[str]] = {}
     for n, u in units.items():
         by.setdefault(u["state"], []).append(n)
     spent = sum(u.get("seconds") or 0 for u in units.values())
-    lines = [f"study {status.get('study')}: {status.get('state')}; "
+    lines = [f"{kind} {status.get(kind)}: {status.get('state')}; "
              + ", ".join(f"{len(by.get(s, []))} {s}" for s in ("done", "running", "interrupted", "failed", "left")
                          if by.get(s) or s in ("done", "left"))
              + f"; {spent / 60:.1f} minutes spent in units"]

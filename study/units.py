@@ -69,15 +69,24 @@ def train_tag(method: str, shift: str, episodes: int, steps: int, seed: int, pre
     return f"{prefix or method}-{slug(shift)}-n{episodes}-k{steps}-s{seed}"
 
 
+def base_data_units(base: list[BaseSource]) -> list[Unit]:
+    """A collect unit for each base dataset with a recipe (done at once when the workspace holds it)."""
+    return [Unit(f"base-data:{b.dataset}", "collect", {"dataset": b.dataset, "expect_hash": b.hash, **b.recipe})
+            for b in base if b.recipe is not None]
+
+
+def base_mix(base: list[BaseSource]) -> list[dict[str, Any]]:
+    """The base half of every batch (a train unit's ``base`` parameter): each dataset at half its weight."""
+    return [{"dataset": b.dataset, "hash": b.hash, "episodes": b.episodes, "weight": 0.5 * b.weight} for b in base]
+
+
 class _Builder:
     def __init__(self, plan: Plan, study: str, base: list[BaseSource]):
         self.plan, self.study, self.base = plan, study, base
         self.units: dict[str, Unit] = {}
-        self.base_deps = tuple(f"base-data:{b.dataset}" for b in base if b.recipe is not None)
-        for b in base:
-            if b.recipe is not None:
-                self._add(Unit(f"base-data:{b.dataset}", "collect",
-                               {"dataset": b.dataset, "expect_hash": b.hash, **b.recipe}))
+        self.base_deps = tuple(u.name for u in base_data_units(base))
+        for u in base_data_units(base):
+            self._add(u)
 
     def _add(self, unit: Unit) -> str:
         old = self.units.get(unit.name)
@@ -106,15 +115,14 @@ class _Builder:
         return self.collect(shift, policy, size), episodes
 
     def train(self, tag: str, shift: str, data: tuple[str, int], *, method: str, init: str | None, steps: int,
-              seed: int, monitor: Mapping[str, Any] | None = None, base_mix: bool = True) -> str:
+              seed: int, monitor: Mapping[str, Any] | None = None, mixed: bool = True) -> str:
         collect_unit, tier = data
         deps = [collect_unit, *self.base_deps]
         if init is not None and init != BASE_POLICY:
             deps.append(f"train:{init}")
-        mix = [{"dataset": b.dataset, "hash": b.hash, "episodes": b.episodes, "weight": 0.5 * b.weight}
-               for b in self.base] if base_mix else []
+        mix = base_mix(self.base) if mixed else []
         target = {"collect": collect_unit, "dataset": self.units[collect_unit].params["dataset"], "tier": tier,
-                  "weight": 0.5 if base_mix else 1.0}
+                  "weight": 0.5 if mixed else 1.0}
         return self._add(Unit(f"train:{tag}", "train", {
             "checkpoint": f"{self.study}-{tag}", "shift": shift, "method": method, "init": init,
             "init_ref": None if init is None else self.ref(init), "steps": steps,

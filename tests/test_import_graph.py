@@ -3,6 +3,8 @@
 * The five folders import only the shared core (``nsl/*.py`` but the CLI) and
   themselves; ``eval/`` may also import ``collectors/``.
 * The core imports none of the folders and nothing of the CLI.
+* ``curriculum/`` (``nsl.curriculum``, graph maths on a transfer matrix) imports only the core and itself:
+  none of the five folders, the wiring (``nsl.study``, ``nsl.share``, ``nsl.cluster``) or the CLI.
 * Every third-party package the code imports is declared in pyproject.toml.
 """
 
@@ -64,6 +66,8 @@ def _nsl_targets(names: list[str]) -> set[str]:
 
 
 FOLDER_MODULES = [(f, m, p) for f in FOLDERS for m, p in _modules(ROOT / f, f"nsl.{f}")]
+STANDALONE = ("curriculum",)  # packages that stand on the core alone
+STANDALONE_MODULES = [(f, m, p) for f in STANDALONE for m, p in _modules(ROOT / f, f"nsl.{f}")]
 CORE_MODULES = [("nsl", ROOT / "nsl" / "__init__.py")] + [(m, ROOT / "nsl" / f"{m.split('.')[1]}.py") for m in CORE]
 
 
@@ -77,6 +81,17 @@ def test_folders_import_only_the_core(folder, module, path):
     allowed = _core_names() | {f"nsl.{folder}"} | {f"nsl.{f}" for f in ALLOWED_FOLDERS.get(folder, ())}
     bad = sorted(t for t in _nsl_targets(_imports(module, path)) if t not in allowed)
     assert not bad, f"{path.relative_to(ROOT)} imports {bad}; a folder may import only {sorted(allowed)}"
+
+
+@pytest.mark.parametrize("package, module, path", STANDALONE_MODULES, ids=[m for _, m, _ in STANDALONE_MODULES])
+def test_standalone_packages_import_only_the_core(package, module, path):
+    allowed = _core_names() | {f"nsl.{package}"}
+    bad = sorted(t for t in _nsl_targets(_imports(module, path)) if t not in allowed)
+    assert not bad, f"{path.relative_to(ROOT)} imports {bad}; nsl.{package} may import only {sorted(allowed)}"
+
+
+def test_standalone_packages_are_checked():
+    assert {m for _, m, _ in STANDALONE_MODULES} >= {"nsl.curriculum", "nsl.curriculum.tree"}
 
 
 @pytest.mark.parametrize("module, path", CORE_MODULES, ids=[m for m, _ in CORE_MODULES])
@@ -108,7 +123,7 @@ def test_every_imported_package_is_declared():
     declared = {_normal(re.split(r"[<>=!~;\[ ]", d, maxsplit=1)[0]) for d in specs}
     dists = packages_distributions()
     missing = {}
-    for folder in ("nsl", *FOLDERS, "scripts"):
+    for folder in ("nsl", *FOLDERS, *STANDALONE, "scripts"):
         for path in sorted((ROOT / folder).rglob("*.py")):
             for name in _imports("x.y", path):
                 top = name.split(".")[0]

@@ -46,4 +46,5 @@ def test_wheel_contains_the_five_subpackages(tmp_path):
     assert "nsl/collectors/env.py" in names and "nsl/eval/success.py" in names
     assert "nsl/catalog/__init__.py" in names and "nsl/learners/__init__.py" in names
     assert "nsl/study/driver.py" in names and "nsl/study/plans/small.toml" in names
+    assert "nsl/curriculum/tree.py" in names and "nsl/study/plans/transfer-small.toml" in names
     assert not any(n.startswith("datasets/") for n in names), "a top-level datasets/ would shadow Hugging Face's"

@@ -1,4 +1,4 @@
-"""``nsl catalog ls|show|lineage|tag|rm|gc|verify``: browse and maintain the catalog."""
+"""``nsl catalog ls|show|lineage|tag|rm|gc|verify|suggest-base``: browse and maintain the catalog."""
 
 from __future__ import annotations
 
@@ -65,6 +65,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     q = add_parser(cs, "verify", help="re-hash checkpoint and dataset files; report altered ones")
     q.add_argument("refs", nargs="*", help="entries to check (default: all)")
     q.set_defaults(func=run_verify)
+
+    q = add_parser(cs, "suggest-base", help="rank catalogued checkpoints as the base for a new task",
+                   description="By the measured transfer advantage where a transfer matrix has it (the checkpoint "
+                               "of a source task, the new task among its targets), otherwise by an offline proxy "
+                               "that needs no training: how well the checkpoint's Q-function ranks the target "
+                               "episodes' successes above their failures (docs/transfer.md).")
+    q.add_argument("--shift", required=True, help="the new task: 'base' or a shift spec, e.g. offset_gripper@0.35")
+    q.add_argument("--data", required=True, help="its target data, NAME[@vN][:K] (the proxy reads the first episodes)")
+    q.add_argument("--episodes", type=int, default=100, help="target episodes the proxy scores each checkpoint on")
+    q.add_argument("--proxy", choices=["auc", "softopc"], default="auc",
+                   help="auc: Q-ranking AUC of success labels; softopc: SoftOPC")
+    src = q.add_mutually_exclusive_group()
+    src.add_argument("--matrix", help="a transfer matrix.json with measured advantages")
+    src.add_argument("--transfer", help="a transfer's name: its $NSL_HOME/transfers/NAME/matrix.json")
+    q.add_argument("--checkpoint", action="append", default=[],
+                   help="a candidate (repeat for several; default: the newest checkpoint of every catalogued name)")
+    add_json(q, "the ranking")
+    q.set_defaults(func=run_suggest_base)
 
 
 def _open():
@@ -277,4 +295,32 @@ def run_verify(args: argparse.Namespace) -> int:
         raise CorruptDataError(f"verify found {len(report.problems)} problem(s) (listed above); restore the files "
                                "or remove the entries with `nsl catalog rm --force REF`")
     print(f"ok: {report.checkpoints} checkpoint(s) and {report.datasets} dataset(s) match their registration")
+    return 0
+
+
+def run_suggest_base(args: argparse.Namespace) -> int:
+    from nsl.commands.curriculum import matrix_path
+    from nsl.curriculum import Correlation, load_matrix
+    from nsl.study import suggest_base
+
+    matrix = load_matrix(matrix_path(args.matrix, args.transfer)) if (args.matrix or args.transfer) else None
+    ranked, data = suggest_base(args.shift, args.data, episodes=args.episodes, matrix=matrix,
+                                checkpoints=args.checkpoint, proxy=args.proxy,
+                                progress=sys.stderr.isatty() and not args.json)
+    corr = (matrix.meta.get("rank_correlation") or {}).get(args.proxy) if matrix is not None else None
+    if args.json:
+        print(json.dumps({"shift": args.shift, "data": data, "proxy": args.proxy, "rank_correlation": corr,
+                          "candidates": [c.to_dict() for c in ranked]}, indent=2, sort_keys=True))
+        return 0
+    rows = [[str(i), c.ref, c.shift, c.basis,
+             "-" if c.measured is None else f"{c.measured:.2f}" + (f" [{c.interval[0]:.2f}, {c.interval[1]:.2f}]"
+                                                                    if c.interval else ""),
+             "-" if c.proxy is None else f"{c.proxy:.3f}", c.note] for i, c in enumerate(ranked, 1)]
+    print(f"bases for {args.shift} (proxy: {args.proxy} on {data})")
+    print(_table(["RANK", "CHECKPOINT", "TRAINED FOR", "BY", "ADVANTAGE [95%]", f"PROXY ({args.proxy})", "NOTE"],
+                 rows))
+    if corr is not None:
+        print(f"the proxy against measured advantages in {args.matrix or args.transfer}: {Correlation(**corr)}")
+    else:
+        print("the proxy's rank correlation with measured transfer is unknown here; `nsl transfer` reports it")
     return 0

@@ -1,0 +1,82 @@
+"""``nsl transfer run|status|report``: measure the transfer-advantage matrix between tasks (resumable)."""
+
+from __future__ import annotations
+
+import argparse
+
+from nsl.commands._options import add_json, add_parser, add_workers
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = add_parser(
+        sub, "transfer", help="measure the transfer-advantage matrix between tasks (resumable); `nsl curriculum` "
+                              "reads it",
+        description="A transfer plan (shipped: tiny, small) names tasks: a shift, a checkpoint that has learned it "
+                    "and its target data. Every ordered pair is fine-tuned (source checkpoint on the target's data) "
+                    "and every target trained from scratch, recording success curves; A = AUC(fine-tune) / "
+                    "AUC(scratch). The runs are ordinary catalogued units of the study's scheduler, so running the "
+                    "same command again resumes. Files go to $NSL_HOME/transfers/NAME/ (docs/transfer.md).")
+    ss = p.add_subparsers(dest="transfer_command", metavar="ACTION")
+    r = add_parser(ss, "run", help="run (or resume) a transfer plan, then write its matrix",
+                   description="Run every unit of PLAN not done yet, then write matrix.json and matrix.md.")
+    r.add_argument("plan", help="a shipped transfer plan (tiny, small) or a path to a TOML plan")
+    r.add_argument("--name", default=None, help="transfer name (default: the plan's name; it prefixes checkpoints)")
+    add_workers(r, help="units run at once, each in its own process (1: one unit at a time, using every core)")
+    r.add_argument("--quiet", action="store_true", help="no progress bars")
+    r.add_argument("--estimate", action="store_true",
+                   help="check the plan and the workspace, print the estimated time of the units left, then stop")
+    r.set_defaults(func=_run)
+    s = add_parser(ss, "status", help="units done, running and left, with the time spent")
+    s.add_argument("name", help="the transfer's name (its folder under $NSL_HOME/transfers)")
+    add_json(s, "the status record")
+    s.set_defaults(func=_status)
+    w = add_parser(ss, "report", help="write matrix.json and matrix.md from the runs finished so far")
+    w.add_argument("name", help="the transfer's name (its folder under $NSL_HOME/transfers)")
+    add_json(w, "the paths and the proxy's rank correlations")
+    w.set_defaults(func=_report)
+    p.set_defaults(func=lambda args: p.print_help() or 1)
+
+
+def _summary(out: dict) -> list[str]:
+    from nsl.curriculum import Correlation
+
+    lines = [f"matrix: {out['matrix']} ({out['measured']} of {out['pairs']} pairs measured)",
+             f"report: {out['report']}"]
+    lines += [f"offline proxy {k} vs measured advantage: {Correlation(**c)}" for k, c in out["rank_correlation"].items()]
+    return lines
+
+
+def _run(args: argparse.Namespace) -> int:
+    from nsl.study import estimate_transfer, run_transfer, status_lines
+
+    if args.estimate:
+        print(f"{args.name or args.plan}: {estimate_transfer(args.plan, args.name)} on a quiet 2-core machine, "
+              "--workers 1")
+        return 0
+    status, report = run_transfer(args.plan, args.name, workers=args.workers, progress=not args.quiet)
+    print("\n".join(status_lines(status, "transfer")[:1]))
+    print("\n".join(_summary(report)))
+    return 0
+
+
+def _status(args: argparse.Namespace) -> int:
+    import json
+
+    from nsl.study import status_lines, transfer_status
+
+    status = transfer_status(args.name)
+    print(json.dumps(status, sort_keys=True) if args.json else "\n".join(status_lines(status, "transfer")))
+    return 0
+
+
+def _report(args: argparse.Namespace) -> int:
+    import json
+
+    from nsl.study import write_transfer_report
+
+    out = write_transfer_report(args.name)
+    if args.json:
+        print(json.dumps({k: str(v) if hasattr(v, "is_file") else v for k, v in out.items()}, sort_keys=True))
+        return 0
+    print("\n".join(_summary(out)))
+    return 0
