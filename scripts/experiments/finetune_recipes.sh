@@ -22,17 +22,22 @@ evaluate() {  # CKPT SHIFTS NAME
   [ -f "$OUT/$3.json" ] || $NSL eval --checkpoint "$1" --shift "$2" --episodes 200 --workers 2 --seed 3000 --json \
     > "$OUT/$3.json" 2>> "$OUT/progress.log"
 }
-evaluate ckpt:base "$(echo $SHIFTS | tr ' ' ','),base" base
-for s in $SHIFTS; do
+RECIPES=("cons01 --conservative 0.1" "cons03 --conservative 0.3")
+for s in $SHIFTS; do  # the fine-tunes (a finished run is resumed at its last step, i.e. not trained again)
   sl=$(slug "$s")
-  # the study's protocol, as the full study trained it
-  evaluate "ckpt:full-ft-$sl-n800-k1000-s0@latest" "$s,base" "protocol-$sl"
-  for recipe in "cons01 --conservative 0.1" "cons03 --conservative 0.3"; do
+  for recipe in "${RECIPES[@]}"; do
     set -- $recipe
     name="$1-$sl"; shift
-    # a finished run is resumed at its last step, i.e. not trained again
     $NSL train --init ckpt:base --steps 1000 $BASE --data "full-$sl-by-base=0.5" --name "$name" "$@" \
       2>> "$OUT/progress.log"
-    evaluate "ckpt:$name@latest" "$s,base" "$name"
+  done
+done
+evaluate ckpt:base "$(echo $SHIFTS | tr ' ' ','),base" base
+for s in $SHIFTS; do  # the evaluations; the study's own protocol run as the full study trained it
+  sl=$(slug "$s")
+  evaluate "ckpt:full-ft-$sl-n800-k1000-s0@latest" "$s,base" "protocol-$sl"
+  for recipe in "${RECIPES[@]}"; do
+    set -- $recipe
+    evaluate "ckpt:$1-$sl@latest" "$s,base" "$1-$sl"
   done
 done
