@@ -41,7 +41,7 @@ def collect_episodes(config: EnvConfig, make_policy: PolicyFactory, indices: Ite
 
     ``make_policy`` is called once in each worker (it must be picklable, e.g. a
     ``functools.partial``); ``batch`` environments per worker step in lock-step
-    so a learned policy evaluates them in one forward pass.  With a ``runner``,
+    and the policy is called once per step for all of them.  With a ``runner``,
     ``workers`` is ignored and the runner runs the chunks of ``batch`` episodes.
     """
     indices = list(indices)

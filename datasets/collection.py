@@ -36,7 +36,14 @@ PLAN_FILE = "plan.json"
 
 
 def _content_spec(spec: dict[str, Any]) -> str:
-    return json.dumps(spec, sort_keys=True)
+    """The settings that define a collection's episodes, comparable as a string.
+
+    A checkpoint policy is identified by its content id.  A checkpoint folder path, which older nsl versions
+    recorded in the policy's description, does not define the episodes and is left out, so a dataset they
+    collected can still be appended to, and a collection they staged resumed.
+    """
+    policy = {k: v for k, v in (spec.get("policy") or {}).items() if k != "checkpoint"}
+    return json.dumps({**spec, "policy": policy}, sort_keys=True)
 
 
 class Collection:
@@ -85,7 +92,9 @@ class Collection:
             shutil.rmtree(staging)
         old = _load_plan(staging)
         if old is not None:
-            same = {k: v for k, v in old.items() if k != "stop"} == {k: v for k, v in plan.items() if k != "stop"}
+            same = ({k: v for k, v in old.items() if k not in ("stop", "spec")}
+                    == {k: v for k, v in plan.items() if k not in ("stop", "spec")}
+                    and _content_spec(old["spec"]) == _content_spec(plan["spec"]))
             if not same:
                 raise ConfigError(
                     f"dataset {name} has an unfinished collection with other settings "

@@ -5,14 +5,21 @@ It follows the collectors' policy interface::
     actions = policy(obs, rngs=rngs)      # obs["image"] (B, H, W, 3) uint8, obs["state"] (B, 2)
 
 and returns (B, 6) float32 environment actions.  Episode i's CEM noise and
-exploration draws come from ``rngs[i]`` alone, so its actions do not depend
-on which episodes share its batch.  For worker processes, pass
-``functools.partial(load_policy, checkpoint_dir)``: it pickles as a path and
-loads the checkpoint inside the worker.
+exploration draws come from ``rngs[i]`` alone, and its network passes are
+computed for its state alone (batch of one), so its actions do not depend on
+which episodes share its batch, nor on the batch size or the thread count: a
+batched convolution or matrix product rounds differently with the batch
+size and the threads (Q-values change in the seventh digit), which could
+flip CEM's choice between two near-equal candidates.  For worker processes,
+pass ``functools.partial(load_policy, checkpoint_dir)``: it pickles as a path
+and loads the checkpoint inside the worker.  :meth:`CEMPolicy.describe`
+records the checkpoint by its content id, never by its path, because it goes
+into the hashed metadata of the datasets the policy collects.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -58,17 +65,30 @@ class CEMPolicy:
             raise ConfigError(f"policy {self.name}: images must be uint8 (B, {n}, {n}, 3); got {image.dtype} {image.shape}")
         return to_float(torch.from_numpy(image)), torch.from_numpy(np.asarray(obs["state"], np.float32))
 
-    def __call__(self, obs: dict[str, np.ndarray], *, rngs: list[np.random.Generator],
-                 privileged: list[dict] | None = None) -> np.ndarray:
+    def greedy(self, obs: dict[str, np.ndarray], rngs: list[np.random.Generator]) -> tuple[np.ndarray, np.ndarray]:
+        """CEM's best active actions (B, A) and their logits (B,); state i uses ``rngs[i]`` only.
+
+        Each state is encoded and searched alone, so its result is the same bits
+        whatever the other states of the batch, the batch size or torch's thread
+        count: every kernel sees the same shapes and the same inputs.
+        """
         image, state = self._inputs(obs)
         if len(rngs) != len(image):
             raise ConfigError(f"policy {self.name}: got {len(rngs)} random generators for {len(image)} observations")
         dims = len(self.net.cfg.action_dims)
         noise = noise_from_rngs(rngs, dims, self.cem)
+        best, logits = np.zeros((len(image), dims), np.float32), np.zeros(len(image), np.float32)
         with torch.inference_mode():
-            ctx = self.net.encode(image, state)
-            best, _ = cem_maximize(lambda cand: self.net.score(ctx, cand), noise, self.cem)
-        active = best.numpy().astype(np.float32)
+            for i in range(len(image)):
+                ctx = self.net.encode(image[i:i + 1], state[i:i + 1])
+                b, s = cem_maximize(functools.partial(self.net.score, ctx), noise[i:i + 1], self.cem)
+                best[i], logits[i] = b[0].numpy(), s[0].item()
+        return best, logits
+
+    def __call__(self, obs: dict[str, np.ndarray], *, rngs: list[np.random.Generator],
+                 privileged: list[dict] | None = None) -> np.ndarray:
+        active, _ = self.greedy(obs, rngs)
+        dims = len(self.net.cfg.action_dims)
         if self.epsilon > 0:
             for i, rng in enumerate(rngs):
                 explore, random_action = rng.random() < self.epsilon, rng.uniform(-1.0, 1.0, dims)
@@ -89,5 +109,6 @@ def load_policy(checkpoint_dir: str | Path, epsilon: float = 0.0, **cem_override
         raise ConfigError(f"unknown CEM setting(s) {unknown}; known: {sorted(cem.to_dict())}")
     cem = replace(cem, **cem_overrides)
     path = Path(checkpoint_dir)
-    info = {"checkpoint": str(path), "checkpoint_id": checkpoint_id(path), "step": ckpt.step}
+    # The content id, not the path: a dataset's metadata (and so its version hash) holds this description.
+    info = {"checkpoint_id": checkpoint_id(path), "step": ckpt.step}
     return CEMPolicy(ckpt.net, cem, epsilon=epsilon, name=f"ckpt:{path.name}", info=info)

@@ -134,8 +134,10 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
                               "fine-tuning method (not scratch)")
         alpha, sigma = config.shrink_perturb
         shrink_perturb(model, alpha, sigma, seed=config.seed + 1)
-    parent_info = None if parent is None else {"id": checkpoint_id(parent.path), "path": str(parent.path),
-                                               "step": parent.step, "method": parent.config["method"]}
+    # The parent by content id, not by folder: the config is part of the checkpoint's id, which must not depend
+    # on where the workspace is (a dataset collected by this checkpoint records that id).
+    parent_info = None if parent is None else {"id": checkpoint_id(parent.path), "step": parent.step,
+                                               "method": parent.config["method"]}
     run = {"training": resolved.to_dict(), "method": method, "parent": parent_info,
            "architecture": model.cfg.to_dict(), "data": data}
     _check_same_run(out, run)
@@ -244,6 +246,8 @@ def _check_same_run(out: Path, run: dict) -> None:
     old = json.loads(f.read_text())
     for section in ("method", "parent", "architecture", "data", "training"):
         a, b = old.get(section), json.loads(json.dumps(run[section]))
+        if section == "parent" and isinstance(a, dict):
+            a = {k: v for k, v in a.items() if k != "path"}  # older runs also recorded the parent's folder
         if section == "training":
             a = TrainConfig.from_dict(a).to_dict() if a else {}  # settings added since then take their defaults
             a = {k: v for k, v in a.items() if k not in RESUMABLE_CHANGES}

@@ -30,7 +30,7 @@ class CollectConfig:
     data: str  # dataset name; an existing name resumes or appends
     workers: int = 1  # simulator processes (does not change the data)
     seed: int = 0  # episode i is a pure function of (seed, i)
-    batch_size: int = 1  # environments per worker stepping in lock-step (a learned policy batches them)
+    batch_size: int = 1  # environments per worker stepping in lock-step (does not change the data)
     split: str = "train"  # object split: train or test objects
     image_size: int = 64  # camera resolution in pixels
     episodes_per_file: int = 100  # episodes per Parquet file (also the resume granularity)

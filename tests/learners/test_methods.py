@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import shutil
+
 import pytest
 import torch
 from learner_factories import TINY_NET, random_transitions, tiny_train
 
 from nsl.errors import ConfigError
-from nsl.learners import ArraySampler, NetConfig, QNetwork, load_checkpoint, train
+from nsl.learners import ArraySampler, NetConfig, QNetwork, checkpoint_id, load_checkpoint, train
 from nsl.learners.networks import is_head_parameter
 
 TARGET = ArraySampler.from_transitions(random_transitions(64, seed=9), name="target")
@@ -28,8 +30,16 @@ def test_fine_tuning_starts_from_exactly_the_parent_at_a_quarter_of_its_lr(paren
     assert parent.keys() == child.keys() and all(torch.equal(parent[k], child[k]) for k in parent)
     cfg = load_checkpoint(result.checkpoint).config
     assert cfg["method"] == "ft" and cfg["training"]["lr"] == pytest.approx(0.25e-3)
-    assert cfg["parent"]["path"] == str(parent_checkpoint) and len(cfg["parent"]["id"]) == 64
+    assert cfg["parent"]["id"] == checkpoint_id(parent_checkpoint) and "path" not in cfg["parent"]
     assert cfg["data"]["sources"][0]["name"] == "target"
+
+
+def test_a_fine_tune_has_the_same_id_wherever_its_parent_and_output_are(parent_checkpoint, tmp_path):
+    """The id hashes the config, so the config names the parent by content, never by folder."""
+    moved = shutil.copytree(parent_checkpoint, tmp_path / "elsewhere" / parent_checkpoint.name)
+    a = train(tiny_train(steps=2), TARGET, tmp_path / "a", init_checkpoint=parent_checkpoint, progress=False)
+    b = train(tiny_train(steps=2), TARGET, tmp_path / "b" / "deeper", init_checkpoint=moved, progress=False)
+    assert checkpoint_id(a.checkpoint) == checkpoint_id(b.checkpoint)
 
 
 def test_fine_tuning_changes_every_column_weight(parent_checkpoint, tmp_path):
