@@ -22,7 +22,7 @@ from nsl.errors import ConfigError, UnknownReferenceError
 from . import actions
 from .plan import Plan, load_plan, parse_plan
 from .report import (RECORDS_FILE, REPORT_FILE, gather, plot_curves, plot_early_stop, plot_tiers, render)
-from .scheduler import STATUS_FILE, pid_alive, read_status, run_graph
+from .scheduler import STATUS_FILE, live_status, pid_alive, read_status, run_graph
 from .units import build_units, order, unit_graph
 
 PLAN_FILE = "plan.json"
@@ -62,21 +62,27 @@ def run_study(plan_ref: str, name: str | None = None, workers: int = 1, progress
     if workers < 1:
         raise ConfigError(f"--workers {workers} must be at least 1")
     plan, name, units, graph = prepare(plan_ref, name)
-    folder = study_dir(name)
+    status = run_planned(study_dir(name), "study", name, plan, units, graph, workers=workers, progress=progress)
+    write_study_report(name)
+    return status
+
+
+def run_planned(folder: Path, key: str, name: str, plan, units: dict, graph, *, workers: int,
+                progress: bool) -> dict[str, Any]:
+    """Run a planned unit graph in ``folder`` (a study's or a transfer's, ``key`` says which): refuse while
+    another live process runs it, save the plan and the unit list, then run (or resume) the graph."""
     running = read_status(folder / STATUS_FILE)
     if running.get("state") == "running" and running.get("pid") != os.getpid() and pid_alive(running.get("pid")):
-        raise ConfigError(f"study {name!r} is being run by process {running['pid']}; wait for it, or stop it and "
+        raise ConfigError(f"{key} {name!r} is being run by process {running['pid']}; wait for it, or stop it and "
                           "run the same command again to resume")
     folder.mkdir(parents=True, exist_ok=True)
     workspace.atomic_write_json(folder / PLAN_FILE, plan.to_dict())
     workspace.atomic_write_json(folder / UNITS_FILE, {
         "units": [{"name": n, "kind": units[n].kind, "deps": list(units[n].deps), "params": dict(units[n].params)}
                   for n in order(graph)], "code_version": code_version()})
-    status = run_graph(graph, folder / STATUS_FILE, execute=actions.run_unit, is_done=actions.is_done,
-                       workers=workers, progress=progress,
-                       meta={"study": name, "plan": plan.source, "workers": workers, "code_version": code_version()})
-    write_study_report(name)
-    return status
+    return run_graph(graph, folder / STATUS_FILE, execute=actions.run_unit, is_done=actions.is_done,
+                     workers=workers, progress=progress,
+                     meta={key: name, "plan": plan.source, "workers": workers, "code_version": code_version()})
 
 
 def _load(name: str) -> Plan:
@@ -91,16 +97,7 @@ def _load(name: str) -> Plan:
 def study_status(name: str) -> dict[str, Any]:
     """The status record, with 'running' units of a dead scheduler shown as 'interrupted'."""
     _load(name)
-    status = read_status(study_dir(name) / STATUS_FILE)
-    if not status:
-        return {"study": name, "state": "not started", "units": {}}
-    alive = pid_alive(status.get("pid"))
-    if status.get("state") == "running" and not alive:
-        status["state"] = "interrupted"
-    for u in status.get("units", {}).values():
-        if u["state"] == "running" and not alive:
-            u["state"] = "interrupted"
-    return status
+    return live_status(study_dir(name) / STATUS_FILE, "study", name)
 
 
 def status_lines(status: dict[str, Any], kind: str = "study") -> list[str]:

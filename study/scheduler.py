@@ -69,6 +69,21 @@ def pid_alive(pid: int | None) -> bool:
         return True
 
 
+def live_status(path: Path, key: str, name: str) -> dict[str, Any]:
+    """The status record at ``path`` (``{key: name, ...}``), with the 'running' units of a dead scheduler shown
+    as 'interrupted'; ``{key: name, "state": "not started"}`` before the first run."""
+    status = read_status(path)
+    if not status:
+        return {key: name, "state": "not started", "units": {}}
+    alive = pid_alive(status.get("pid"))
+    if status.get("state") == "running" and not alive:
+        status["state"] = "interrupted"
+    for u in status.get("units", {}).values():
+        if u["state"] == "running" and not alive:
+            u["state"] = "interrupted"
+    return status
+
+
 class _Status:
     def __init__(self, path: Path, graph: nx.DiGraph, meta: dict[str, Any]):
         self.path = Path(path)

@@ -14,7 +14,6 @@ A transfer lives in ``$NSL_HOME/transfers/NAME/``::
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -23,12 +22,11 @@ from nsl import code_version, workspace
 from nsl.errors import ConfigError, UnknownReferenceError
 
 from . import actions
-from .scheduler import STATUS_FILE, pid_alive, read_status, run_graph
+from .driver import PLAN_FILE, run_planned
+from .scheduler import STATUS_FILE, live_status, read_status
 from .transfer import TransferPlan, build_transfer_units, ft_tag, load_transfer_plan, parse_transfer_plan, scratch_tag
 from .units import order, unit_graph
 
-PLAN_FILE = "plan.json"
-UNITS_FILE = "units.json"
 MATRIX_JSON = "matrix.json"
 MATRIX_MD = "matrix.md"
 PROXY_FILE = "proxy.json"
@@ -110,20 +108,8 @@ def run_transfer(plan_ref: str, name: str | None = None, workers: int = 1,
     if workers < 1:
         raise ConfigError(f"--workers {workers} must be at least 1")
     plan, units, graph = prepare_transfer(plan_ref, name)
-    folder = transfer_dir(plan.name)
-    running = read_status(folder / STATUS_FILE)
-    if running.get("state") == "running" and running.get("pid") != os.getpid() and pid_alive(running.get("pid")):
-        raise ConfigError(f"transfer {plan.name!r} is being run by process {running['pid']}; wait for it, or stop it "
-                          "and run the same command again to resume")
-    folder.mkdir(parents=True, exist_ok=True)
-    workspace.atomic_write_json(folder / PLAN_FILE, plan.to_dict())
-    workspace.atomic_write_json(folder / UNITS_FILE, {
-        "units": [{"name": n, "kind": units[n].kind, "deps": list(units[n].deps), "params": dict(units[n].params)}
-                  for n in order(graph)], "code_version": code_version()})
-    status = run_graph(graph, folder / STATUS_FILE, execute=actions.run_unit, is_done=actions.is_done,
-                       workers=workers, progress=progress,
-                       meta={"transfer": plan.name, "plan": plan.source, "workers": workers,
-                             "code_version": code_version()})
+    status = run_planned(transfer_dir(plan.name), "transfer", plan.name, plan, units, graph, workers=workers,
+                         progress=progress)
     return status, write_transfer_report(plan.name)
 
 
@@ -141,16 +127,7 @@ def load_saved(name: str) -> TransferPlan:
 def transfer_status(name: str) -> dict[str, Any]:
     """The status record, with 'running' units of a dead scheduler shown as 'interrupted'."""
     load_saved(name)
-    status = read_status(transfer_dir(name) / STATUS_FILE)
-    if not status:
-        return {"transfer": name, "state": "not started", "units": {}}
-    alive = pid_alive(status.get("pid"))
-    if status.get("state") == "running" and not alive:
-        status["state"] = "interrupted"
-    for u in status.get("units", {}).values():
-        if u["state"] == "running" and not alive:
-            u["state"] = "interrupted"
-    return status
+    return live_status(transfer_dir(name) / STATUS_FILE, "transfer", name)
 
 
 # --- the matrix -----------------------------------------------------------------------------------------------------
