@@ -21,7 +21,14 @@ def touch_unit(unit: Unit, inner_workers: int, progress: bool) -> dict:
     for d in unit.deps:  # its dependencies' outputs exist before it starts
         assert (out / d.replace(":", "_")).is_file(), d
     (out / f"{unit.name.replace(':', '_')}.start").write_text(f"{time.time()} {os.getpid()}")
-    time.sleep(unit.params.get("sleep", 0.0))
+    met = True
+    if unit.kind == "collect" and unit.params.get("meet"):  # wait (bounded) until the other collection has started
+        deadline = time.monotonic() + 60.0
+        others = [out / f"{n}.start" for n in ("collect_a", "collect_b") if n != unit.name.replace(":", "_")]
+        while not all(o.exists() for o in others) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        met = all(o.exists() for o in others)  # run one after the other, the first would wait in vain
+    (out / f"{unit.name.replace(':', '_')}.met").write_text(str(met))
     (out / unit.name.replace(":", "_")).write_text(str(inner_workers))
     return {}
 
@@ -30,8 +37,8 @@ def done(unit: Unit) -> bool:
     return (Path(unit.params["dir"]) / unit.name.replace(":", "_")).is_file()
 
 
-def _graph(tmp_path, fail: str | None = None, sleep: float = 0.0):
-    p = {"dir": str(tmp_path), "sleep": sleep}
+def _graph(tmp_path, fail: str | None = None, meet: bool = False):
+    p = {"dir": str(tmp_path), "meet": meet}
     units = [Unit("collect:a", "collect", p), Unit("collect:b", "collect", p),
              Unit("train:x", "train", {**p, "fail": fail == "train:x"}, ("collect:a", "collect:b")),
              Unit("eval:x", "eval", p, ("train:x",)), Unit("eval:b", "eval", p, ("collect:b",))]
@@ -60,14 +67,14 @@ def test_a_failing_unit_stops_the_study_and_is_reported(tmp_path):
 
 
 def test_two_workers_run_independent_units_at_once_in_their_own_processes(tmp_path):
-    status = run_graph(_graph(tmp_path, sleep=1.0), tmp_path / "status.json", execute=touch_unit, is_done=done,
+    status = run_graph(_graph(tmp_path, meet=True), tmp_path / "status.json", execute=touch_unit, is_done=done,
                        workers=2, progress=False)
     assert all(u["state"] == "done" for u in status["units"].values())
     starts = {n: (tmp_path / f"{n}.start").read_text().split() for n in ("collect_a", "collect_b")}
     pids = {p for _, p in starts.values()}
     assert len(pids) == 2 and str(os.getpid()) not in pids
-    # the two collections overlapped: each started before the other's output was written (1 s later)
+    # the two collections overlapped: each saw the other start before it finished (no clock involved)
+    assert all((tmp_path / f"{n}.met").read_text() == "True" for n in ("collect_a", "collect_b"))
     a, b = (float(starts[n][0]) for n in ("collect_a", "collect_b"))
-    assert abs(a - b) < 1.0
     ta = float((tmp_path / "train_x.start").read_text().split()[0])
     assert ta > max(a, b)  # and the training waited for both
