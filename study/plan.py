@@ -174,21 +174,27 @@ def parse_plan(data: dict[str, Any], source: str = "", default_name: str = "stud
     return plan
 
 
-def load_plan(ref: str) -> Plan:
-    """A shipped plan by name (``tiny``, ``small``, ``full``, ``paper``) or a TOML file path."""
+def read_plan_toml(ref: str, shipped: tuple[str, ...] | list[str], what: str = "plan",
+                   prefix: str = "") -> tuple[dict[str, Any], str, str]:
+    """(parsed TOML, source, default name) of a shipped plan ``plans/PREFIX+REF.toml`` or a TOML file path."""
     path = Path(ref)
-    if ref in SHIPPED and not path.is_file():
-        text = resources.files("nsl.study").joinpath("plans", f"{ref}.toml").read_text()
-        source, default_name = f"shipped plan {ref!r}", ref
+    if ref in shipped and not path.is_file():
+        text = resources.files("nsl.study").joinpath("plans", f"{prefix}{ref}.toml").read_text()
+        source, default_name = f"shipped {what} {ref!r}", f"{prefix}{ref}"
     elif path.is_file():
         text, source, default_name = path.read_text(), str(path), path.stem
     else:
-        raise UnknownReferenceError(f"plan {ref!r} is neither a file nor a shipped plan; use one of "
-                                    f"{', '.join(SHIPPED)} or a path to a TOML plan")
+        raise UnknownReferenceError(f"{what} {ref!r} is neither a file nor a shipped plan; use one of "
+                                    f"{', '.join(shipped)} or a path to a TOML plan")
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text), source, default_name
     except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"plan {source} is not valid TOML: {e}") from None
+        raise ConfigError(f"{what} {source} is not valid TOML: {e}") from None
+
+
+def load_plan(ref: str) -> Plan:
+    """A shipped plan by name (``tiny``, ``small``, ``full``, ``paper``) or a TOML file path."""
+    data, source, default_name = read_plan_toml(ref, SHIPPED)
     return parse_plan(data, source=source, default_name=default_name)
 
 

@@ -29,15 +29,12 @@ Sections (``study/plans/transfer-small.toml`` is a commented example)::
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import MISSING, asdict, dataclass, fields
-from importlib import resources
-from pathlib import Path
 from typing import Any
 
 from nsl.errors import ConfigError, UnknownReferenceError
 
-from .plan import _positive, _seeds, _shift
+from .plan import _positive, _seeds, _shift, read_plan_toml
 from .units import BaseSource, Unit, base_data_units, base_mix, slug
 
 SHIPPED_TRANSFER = ("tiny", "small")  # study/plans/transfer-NAME.toml
@@ -186,19 +183,7 @@ def validate_transfer(plan: TransferPlan) -> TransferPlan:
 
 def load_transfer_plan(ref: str) -> TransferPlan:
     """A shipped transfer plan by name (``tiny``, ``small``) or a TOML file path."""
-    path = Path(ref)
-    if ref in SHIPPED_TRANSFER and not path.is_file():
-        text = resources.files("nsl.study").joinpath("plans", f"transfer-{ref}.toml").read_text()
-        source, default_name = f"shipped transfer plan {ref!r}", f"transfer-{ref}"
-    elif path.is_file():
-        text, source, default_name = path.read_text(), str(path), path.stem
-    else:
-        raise UnknownReferenceError(f"transfer plan {ref!r} is neither a file nor a shipped plan; use one of "
-                                    f"{', '.join(SHIPPED_TRANSFER)} or a path to a TOML plan")
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"transfer plan {source} is not valid TOML: {e}") from None
+    data, source, default_name = read_plan_toml(ref, SHIPPED_TRANSFER, "transfer plan", prefix="transfer-")
     return parse_transfer_plan(data, source=source, default_name=default_name)
 
 
