@@ -266,3 +266,71 @@ def write_transfer_report(name: str) -> dict[str, Any]:
     measured = sum(v is not None for v in matrix.advantage.values())
     return {"matrix": folder / MATRIX_JSON, "report": folder / MATRIX_MD, "measured": measured,
             "pairs": len(matrix.advantage), "rank_correlation": matrix.meta["rank_correlation"]}
+
+
+# --- following the curricula ----------------------------------------------------------------------------------------
+
+def _final_success(plan: TransferPlan, tag: str) -> float | None:
+    from nsl.eval import CURVE_FILE, read_curve
+
+    path = workspace.runs_dir() / f"{plan.name}-{tag}" / CURVE_FILE
+    if _curve_auc(plan, tag) is None:
+        return None
+    return [r.target.success_rate for r in read_curve(path) if r.target is not None][-1]
+
+
+def prepare_curricula(name: str, seeds: tuple[int, ...] | None = None):
+    """The curricula plan of a finished transfer (its optimal and pessimal trees) and the units that follow it."""
+    from nsl.curriculum import build_curriculum
+
+    from .curricula import TREES, CurriculaPlan, build_curricula_units, default_seeds, folder
+
+    plan = load_saved(name)
+    matrix = measure_matrix(plan)
+    missing = sum(v is None for v in matrix.advantage.values())
+    if missing:
+        raise ConfigError(f"transfer {name!r} has {missing} unmeasured pairs; finish `nsl transfer run` first "
+                          "(the curricula come from the complete matrix)")
+    seeds = tuple(seeds) if seeds else default_seeds(plan)
+    overlap = sorted(set(seeds) & set(plan.seeds))
+    if overlap:
+        raise ConfigError(f"--seeds {list(seeds)} repeat the matrix's own seeds {overlap}; following a curriculum "
+                          "with them would rerun the matrix's runs, so choose others")
+    curriculum = build_curriculum(matrix)
+    cplan = CurriculaPlan(name, seeds, {t: dict(getattr(curriculum, t).parent) for t in TREES})
+    saved = folder(name) / PLAN_FILE
+    if saved.is_file() and json.loads(saved.read_text()) != json.loads(json.dumps(cplan.to_dict())):
+        raise ConfigError(f"the curricula of transfer {name!r} were started with other trees or seeds ({saved}); "
+                          "use the same --seeds to resume")
+    study = _study_plan(plan)
+    units = build_curricula_units(plan, cplan, study.base, actions.base_sources(study), _ft_lr(study.base))
+    return plan, cplan, units, unit_graph(units)
+
+
+def run_curricula(name: str, seeds: tuple[int, ...] | None = None, workers: int = 1,
+                  progress: bool = True) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Follow the optimal and pessimal curricula of transfer ``name`` for real (resumable), then report."""
+    from .curricula import folder
+
+    if workers < 1:
+        raise ConfigError(f"--workers {workers} must be at least 1")
+    _, cplan, units, graph = prepare_curricula(name, seeds)
+    status = run_planned(folder(name), "curricula", name, cplan, units, graph, workers=workers, progress=progress)
+    return status, write_curricula_report(name)
+
+
+def write_curricula_report(name: str) -> dict[str, Any]:
+    """curricula.json and curricula.md from the runs finished so far."""
+    from .curricula import RESULT_JSON, RESULT_MD, CurriculaPlan, folder, measure, render
+
+    plan = load_saved(name)
+    path = folder(name) / PLAN_FILE
+    if not path.is_file():
+        raise UnknownReferenceError(f"transfer {name!r} has no curricula yet; run `nsl transfer curricula {name}`")
+    saved = json.loads(path.read_text())
+    cplan = CurriculaPlan(saved["transfer"], tuple(saved["seeds"]), saved["trees"], str(path))
+    result = measure(plan, cplan, measure_matrix(plan), lambda tag: _curve_auc(plan, tag),
+                     lambda tag: _final_success(plan, tag))
+    workspace.atomic_write_json(folder(name) / RESULT_JSON, result)
+    workspace.atomic_write_bytes(folder(name) / RESULT_MD, (render(result, name) + "\n").encode())
+    return {"result": folder(name) / RESULT_JSON, "report": folder(name) / RESULT_MD, **result}

@@ -34,7 +34,31 @@ def register(sub: argparse._SubParsersAction) -> None:
     w.add_argument("name", help="the transfer's name (its folder under $NSL_HOME/transfers)")
     add_json(w, "the paths and the proxy's rank correlations")
     w.set_defaults(func=_report)
+    c = add_parser(ss, "curricula", help="follow the optimal and pessimal curricula of a finished transfer for real, "
+                                         "and compare their measured cost with the predicted one",
+                   description="Trains each tree of `nsl curriculum` as a real sequence (each task fine-tuned from "
+                               "the checkpoint the curriculum made for its parent), with training seeds the matrix "
+                               "did not use, and measures each edge's advantage, each tree's cost, and whether a "
+                               "task's transfer depends on how its source was reached. Resumable; writes "
+                               "$NSL_HOME/transfers/NAME/curricula/curricula.md (docs/transfer.md).")
+    c.add_argument("name", help="a transfer whose matrix is complete")
+    c.add_argument("--seeds", type=_seed_list, default=None,
+                   help="comma-separated training seeds (default: as many as the matrix's, after its highest)")
+    add_workers(c, help="units run at once, each in its own process (1: one unit at a time, using every core)")
+    c.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_json(c, "the measured and predicted costs")
+    c.set_defaults(func=_curricula)
     p.set_defaults(func=lambda args: p.print_help() or 1)
+
+
+def _seed_list(text: str) -> tuple[int, ...]:
+    try:
+        seeds = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of seeds, e.g. 2,3") from None
+    if not seeds or min(seeds) < 0 or len(set(seeds)) != len(seeds):
+        raise argparse.ArgumentTypeError(f"{text!r}: give distinct seeds >= 0, e.g. 2,3")
+    return seeds
 
 
 def _summary(out: dict) -> list[str]:
@@ -79,4 +103,21 @@ def _report(args: argparse.Namespace) -> int:
         print(json.dumps({k: str(v) if hasattr(v, "is_file") else v for k, v in out.items()}, sort_keys=True))
         return 0
     print("\n".join(_summary(out)))
+    return 0
+
+
+def _curricula(args: argparse.Namespace) -> int:
+    import json
+
+    from nsl.study import run_curricula, status_lines
+
+    status, out = run_curricula(args.name, args.seeds, workers=args.workers, progress=not args.quiet)
+    if args.json:
+        print(json.dumps({k: str(v) if hasattr(v, "is_file") else v for k, v in out.items()}, sort_keys=True))
+        return 0
+    print("\n".join(status_lines(status, "curricula")[:1]))
+    for name, tree in out["trees"].items():
+        measured = "n/a" if tree["measured"] is None else f"{tree['measured']:+.2f}"
+        print(f"{name} curriculum: predicted cost {tree['predicted']:+.2f}, measured {measured}")
+    print(f"report: {out['report']}")
     return 0
