@@ -36,3 +36,41 @@ def test_iterated_recipe_collects_at_most_10000_episodes_and_trains_on_all_of_th
     assert used == budget  # every collected episode, each tier exactly its dataset's size
     weights = [float(w) for w in re.findall(r"--data \S+=([\d.]+)", scripted + " " + final[0])]
     assert abs(sum(weights) - 1.0) < 1e-9
+
+
+def test_rounds_recipe_keeps_to_50000_episodes_and_its_final_runs_read_every_round(tmp_path):
+    """Run pretrain_base_rounds.sh with a recording stand-in for `nsl`: the commands it would run."""
+    import os
+    import shlex
+    import subprocess
+
+    log = tmp_path / "calls"
+    fake = tmp_path / "nsl"
+    fake.write_text(f'#!/usr/bin/env bash\nprintf "%q " "$@" >> {log}\necho >> {log}\n')
+    fake.chmod(0o755)
+    env = {**os.environ, "NSL": str(fake), "NSL_HOME": str(tmp_path / "home"), "SEEDS": "0 1 2"}
+    subprocess.run(["bash", str(SCRIPTS / "experiments" / "pretrain_base_rounds.sh")], env=env, check=True,
+                   capture_output=True)
+    calls = [shlex.split(line) for line in log.read_text().splitlines()]
+
+    def opt(call, flag):
+        return [call[i + 1] for i, a in enumerate(call) if a == flag]
+
+    collects = {opt(c, "--data")[0]: int(opt(c, "--episodes")[0]) for c in calls if c[0] == "collect"}
+    assert sum(collects.values()) <= 50_000, collects
+    rounds = sorted(n for n in collects if n.startswith("grasp-rounds-"))
+    assert len(rounds) == 4
+    trains = {opt(c, "--name")[0]: c for c in calls if c[0] == "train"}
+    finals = [trains["rounds-r4"], trains["rounds-r4-s1"], trains["rounds-r4-s2"]]
+    for call in finals:
+        data = dict(d.split("=") for d in opt(call, "--data"))
+        used = {ref.split(":")[0]: int(ref.split(":")[1]) if ":" in ref else collects[ref] for ref in data}
+        assert used == collects  # every collected episode, each tier exactly its dataset's size
+        assert abs(sum(float(w) for w in data.values()) - 1.0) < 1e-3
+    assert [opt(c, "--seed") for c in finals] == [[], ["1"], ["2"]]
+    # each round is collected by the policy of the round before it
+    for i in range(1, 5):
+        call = next(c for c in calls if c[0] == "collect" and opt(c, "--data") == [f"grasp-rounds-{i}"])
+        assert opt(call, "--policy") == [f"ckpt:rounds-r{i - 1}@6000"]
+    evals = [c for c in calls if c[0] == "eval"]
+    assert opt(evals[0], "--checkpoint") == ["ckpt:rounds-r4@6000,ckpt:rounds-r4-s1@6000,ckpt:rounds-r4-s2@6000"]
