@@ -20,7 +20,8 @@ Units (``X`` is the transfer's name; the tags are the transfer's own where a run
 
     train:scratch-DST-nK-kS-sSEED              the denominators, for the new seeds
     train:ft-P-to-T-nK-kS-sSEED                from P's catalogued checkpoint (a scratch child, or the control)
-    train:ft-R-then-..-P-to-T-nK-kS-sSEED      from the checkpoint the curriculum made for P along R -> .. -> P
+    train:ft-via-I-..-J-to-T-nK-kS-sSEED       from the checkpoint the curriculum made for P along the path of
+                                               tasks I -> .. -> J = P (their places in the plan's task list)
 
 Files in ``$NSL_HOME/transfers/X/curricula/``: ``plan.json`` (the trees and seeds), ``units.json``,
 ``status.json``, ``curricula.json`` and ``curricula.md``.
@@ -35,6 +36,7 @@ from typing import Any
 
 from nsl import code_version, workspace
 from nsl.errors import ConfigError
+from nsl.refs import check_name
 
 from .transfer import TransferPlan, build_transfer_units, ft_tag, scratch_tag
 from .units import Unit, slug
@@ -83,8 +85,8 @@ def edge_tag(plan: TransferPlan, path: list[str], seed: int) -> str:
     if len(path) == 2:
         return ft_tag(plan, path[0], path[1], seed)
     dst = path[-1]
-    via = "-then-".join(slug(t) for t in path[:-1])
-    return f"ft-{via}-to-{slug(dst)}-n{plan.task(dst).episodes}-k{plan.steps}-s{seed}"
+    via = "-".join(str(plan.task_names.index(t)) for t in path[:-1])  # tasks by their place in the plan: short
+    return f"ft-via-{via}-to-{slug(dst)}-n{plan.task(dst).episodes}-k{plan.steps}-s{seed}"
 
 
 def build_curricula_units(plan: TransferPlan, cplan: CurriculaPlan, base_ref: str, base, ft_lr: float
@@ -116,7 +118,7 @@ def build_curricula_units(plan: TransferPlan, cplan: CurriculaPlan, base_ref: st
                 need(f"train:{ft_tag(plan, p, t, seed)}")  # the control: p's catalogued checkpoint
                 tag, into = edge_tag(plan, path, seed), edge_tag(plan, path[:-1], seed)
                 direct = pool[f"train:{ft_tag(plan, p, t, seed)}"]
-                params = {**direct.params, "checkpoint": f"{plan.name}-{tag}",
+                params = {**direct.params, "checkpoint": check_name("checkpoint", f"{plan.name}-{tag}"),
                           "init_ref": f"ckpt:{plan.name}-{into}@latest"}
                 units[f"train:{tag}"] = Unit(f"train:{tag}", "train", params, (*direct.deps, f"train:{into}"))
     return units

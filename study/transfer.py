@@ -33,6 +33,7 @@ from dataclasses import MISSING, asdict, dataclass, fields
 from typing import Any
 
 from nsl.errors import ConfigError, UnknownReferenceError
+from nsl.refs import check_name
 
 from .plan import _positive, _seeds, _shift, read_plan_toml
 from .units import BaseSource, Unit, base_data_units, base_mix, slug
@@ -216,6 +217,7 @@ def build_transfer_units(plan: TransferPlan, base_ref: str, base: list[BaseSourc
 
     def train(tag: str, dst: Task, method: str, init_ref: str, lr: float | None) -> None:
         deps = (*base_deps, *([data_unit[dst.shift]] if data_unit[dst.shift] else []))
+        check_name("checkpoint", f"{plan.name}-{tag}")  # refused before any unit runs (a shorter name fits)
         params = {"checkpoint": f"{plan.name}-{tag}", "shift": dst.shift, "method": method, "init": None,
                   "init_ref": init_ref, "steps": plan.steps, "seed": seed, "base": base_mix(base),
                   "target": {"collect": data_unit[dst.shift], "dataset": dst.data, "tier": dst.episodes,

@@ -40,10 +40,10 @@ def test_a_chain_fine_tunes_each_task_from_the_checkpoint_the_curriculum_made_fo
         first = trains[f"train:ft-base-to-harsh-lighting-n8-k4-s{s}"]
         assert first.params["init_ref"] == "ckpt:base" and first.params["seed"] == s
         # depth 2: from the checkpoint made along base -> harsh lighting, and after it
-        deep = trains[f"train:ft-base-then-harsh-lighting-to-offset-gripper-n8-k4-s{s}"]
+        deep = trains[f"train:ft-via-0-1-to-offset-gripper-n8-k4-s{s}"]
         assert deep.params["init_ref"] == f"ckpt:x3-ft-base-to-harsh-lighting-n8-k4-s{s}@latest"
         assert f"train:ft-base-to-harsh-lighting-n8-k4-s{s}" in deep.deps
-        assert deep.params["checkpoint"] == f"x3-ft-base-then-harsh-lighting-to-offset-gripper-n8-k4-s{s}"
+        assert deep.params["checkpoint"] == f"x3-ft-via-0-1-to-offset-gripper-n8-k4-s{s}"
         assert deep.params["target"]["dataset"] == "d-offset" and deep.params["lr"] == 7.5e-5
         # its control: the same fine-tune from the catalogued checkpoint of harsh lighting
         assert trains[f"train:ft-harsh-lighting-to-offset-gripper-n8-k4-s{s}"].params["init_ref"] == "ckpt:harsh"
@@ -62,8 +62,8 @@ def test_measured_costs_and_the_independence_check_on_known_curves():
     auc = {"scratch-harsh-lighting-n8-k4-s2": 0.1, "scratch-harsh-lighting-n8-k4-s3": 0.2,
            "scratch-offset-gripper-n8-k4-s2": 0.1, "scratch-offset-gripper-n8-k4-s3": 0.01,  # floored at 1/10
            "ft-base-to-harsh-lighting-n8-k4-s2": 0.3, "ft-base-to-harsh-lighting-n8-k4-s3": 0.4,
-           "ft-base-then-harsh-lighting-to-offset-gripper-n8-k4-s2": 0.2,
-           "ft-base-then-harsh-lighting-to-offset-gripper-n8-k4-s3": 0.2,
+           "ft-via-0-1-to-offset-gripper-n8-k4-s2": 0.2,
+           "ft-via-0-1-to-offset-gripper-n8-k4-s3": 0.2,
            "ft-harsh-lighting-to-offset-gripper-n8-k4-s2": 0.4, "ft-harsh-lighting-to-offset-gripper-n8-k4-s3": 0.5}
     out = measure(plan, cplan, matrix, auc.get, lambda tag: 0.5 if tag in auc else None)
     opt = out["trees"]["optimal"]
@@ -82,7 +82,7 @@ def test_measured_costs_and_the_independence_check_on_known_curves():
     assert row["per_seed"] == pytest.approx({"2": 2.0 - 0.4 / 0.1, "3": 2.0 - 0.5 / 0.1})
     assert row["difference"] == pytest.approx(-2.5) and row["interval"][0] < -2.5 < row["interval"][1]
     # an unfinished run leaves the tree incomplete rather than guessing
-    del auc["ft-base-then-harsh-lighting-to-offset-gripper-n8-k4-s3"]
+    del auc["ft-via-0-1-to-offset-gripper-n8-k4-s3"]
     out = measure(plan, cplan, matrix, auc.get, lambda tag: None)
     assert not out["trees"]["optimal"]["complete"] and out["trees"]["optimal"]["measured"] is None
 
