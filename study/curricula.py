@@ -161,8 +161,10 @@ def measure(plan: TransferPlan, cplan: CurriculaPlan, matrix, auc, last) -> dict
         for t in Tree(parent, {}, 0.0).order(plan.task_names):
             p = parent[t]
             row: dict[str, Any] = {"from": p, "to": t, "predicted": matrix.get(p, t)}
-            if p == SCRATCH:
-                row.update(measured=1.0, interval=None, per_seed={str(s): 1.0 for s in cplan.seeds}, final=None)
+            if p == SCRATCH:  # taken as learned; its success is what the scratch runs reach with the same steps
+                finals = [v for s in cplan.seeds if (v := last(scratch_tag(plan, t, s))) is not None]
+                row.update(measured=1.0, interval=None, per_seed={str(s): 1.0 for s in cplan.seeds},
+                           final=sum(finals) / len(finals) if finals else None)
                 for s in cplan.seeds:
                     cost[s] -= 1.0
             else:
@@ -177,14 +179,20 @@ def measure(plan: TransferPlan, cplan: CurriculaPlan, matrix, auc, last) -> dict
                 if len(path) > 2:
                     diffs = {s: ratios[s] - d for s in ratios
                              if (d := ratio(ft_tag(plan, p, t, s), t, s)) is not None}
+                    auc_diffs = [a - d for s in cplan.seeds if (a := auc(edge_tag(plan, path, s))) is not None
+                                 and (d := auc(ft_tag(plan, p, t, s))) is not None]
                     mean_d, ci_d = _mean_t(list(diffs.values()))
+                    mean_a, ci_a = _mean_t(auc_diffs)
                     out["independence"].append({"tree": name, "path": path, "matrix": matrix.get(p, t),
                                                 "difference": mean_d, "interval": ci_d,
-                                                "per_seed": {str(s): d for s, d in diffs.items()}})
+                                                "per_seed": {str(s): d for s, d in diffs.items()},
+                                                "auc_difference": mean_a, "auc_interval": ci_a})
             edges.append(row)
         complete = all(c is not None for c in cost.values())
         mean, ci = _mean_t(list(cost.values()) if complete else [])
+        finals = [e["final"] for e in edges]
         out["trees"][name] = {"predicted": sum(-e["predicted"] for e in edges), "measured": mean, "interval": ci,
+                              "mean_final": None if None in finals else sum(finals) / len(finals),
                               "per_seed": {str(s): c for s, c in cost.items()} if complete else {},
                               "edges": edges, "complete": complete}
     return out
@@ -209,12 +217,13 @@ def render(result: dict[str, Any], transfer: str) -> str:
                   "| task | learned from | A predicted | A measured | success at the last step |",
                   "|---|---|---|---|---|"]
         for e in tree["edges"]:
-            final = "taken as learned" if e["from"] == "scratch" else num(e["final"])
+            final = num(e["final"]) + (" (the scratch runs; taken as learned)" if e["from"] == "scratch" else "")
             lines.append(f"| {e['to']} | {e['from']} | {num(e['predicted'])} | {num(e['measured'])}"
                          f"{ci(e['interval'])} | {final} |")
         lines += ["", f"Cost (C = -sum A; lower is better): predicted **{tree['predicted']:+.2f}**, measured "
                       f"**{num(tree['measured'], True)}**{ci(tree['interval'])}"
-                  + ("" if tree["complete"] else " (not every run has finished)"), ""]
+                  + ("" if tree["complete"] else " (not every run has finished)")
+                  + f". Mean success at the last step over the tasks: {num(tree['mean_final'])}.", ""]
     ref = result["reference"]
     lines += [f"Predicted reference costs: every task from the base {num(ref['from_base'], True)}, every task from "
               f"scratch {num(ref['from_scratch'], True)}.", "",
@@ -225,11 +234,16 @@ def render(result: dict[str, Any], transfer: str) -> str:
     else:
         lines += ["Each row fine-tunes the path's last task from two checkpoints of its source: the one the "
                   "curriculum made along the path, and the catalogued one, with the same seeds. Difference = "
-                  "A(from the path's checkpoint) - A(from the catalogued one).", "",
-                  "| tree | path | A in the matrix | difference, measured |", "|---|---|---|---|"]
+                  "A(from the path's checkpoint) - A(from the catalogued one), and the same for the AUC itself "
+                  "(mean success over the run, in points).", "",
+                  "| tree | path | A in the matrix | difference of A | difference of AUC, points |",
+                  "|---|---|---|---|---|"]
         for r in result["independence"]:
+            auc_d = "n/a" if r["auc_difference"] is None else f"{100 * r['auc_difference']:+.1f}"
+            auc_ci = "" if not r["auc_interval"] else (f" [{100 * r['auc_interval'][0]:+.1f}, "
+                                                      f"{100 * r['auc_interval'][1]:+.1f}]")
             lines.append(f"| {r['tree']} | {' -> '.join(r['path'])} | {num(r['matrix'])} | "
-                         f"{num(r['difference'], True)}{ci(r['interval'])} |")
+                         f"{num(r['difference'], True)}{ci(r['interval'])} | {auc_d}{auc_ci} |")
     return "\n".join(lines)
 
 

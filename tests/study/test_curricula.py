@@ -75,12 +75,14 @@ def test_measured_costs_and_the_independence_check_on_known_curves():
     assert opt["edges"][1]["measured"] == pytest.approx(2.5) and opt["edges"][2]["measured"] == pytest.approx(2.0)
     assert opt["per_seed"] == pytest.approx({str(s): -(1 + a_harsh[s] + a_offset[s]) for s in (2, 3)})
     assert opt["measured"] == pytest.approx(-5.5) and opt["complete"]
+    assert opt["edges"][0]["final"] is None and opt["mean_final"] is None  # no scratch run of base recorded
     pes = out["trees"]["pessimal"]
     assert pes["predicted"] == pes["measured"] == -3.0
     (row,) = out["independence"]
     assert row["path"] == ["base", "harsh_lighting", "offset_gripper"] and row["matrix"] == 4.0
     assert row["per_seed"] == pytest.approx({"2": 2.0 - 0.4 / 0.1, "3": 2.0 - 0.5 / 0.1})
     assert row["difference"] == pytest.approx(-2.5) and row["interval"][0] < -2.5 < row["interval"][1]
+    assert row["auc_difference"] == pytest.approx(((0.2 - 0.4) + (0.2 - 0.5)) / 2)
     # an unfinished run leaves the tree incomplete rather than guessing
     del auc["ft-via-0-1-to-offset-gripper-n8-k4-s3"]
     out = measure(plan, cplan, matrix, auc.get, lambda tag: None)
