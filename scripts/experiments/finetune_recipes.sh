@@ -41,3 +41,4 @@ for s in $SHIFTS; do  # the evaluations; the study's own protocol run as the ful
     evaluate "ckpt:$1-$sl@latest" "$s,base" "$1-$sl"
   done
 done
+python3 scripts/experiments/recipes_table.py "$OUT"
