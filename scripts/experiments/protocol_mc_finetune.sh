@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# The study's protocol on the rounds base (scripts/experiments/protocol_rounds.toml) with one change to the
+# fine-tune: Monte-Carlo returns and the base's own crop (--n-step 8 --crop 2), as the base was trained, instead of
+# nsl train's one-step default (docs/experiments.md, "Fine-tuning the rounds base"). Same data (the 800 episodes the
+# study plan's run collected per shift, the base's 44,000 pre-training episodes at half their recorded weights),
+# same steps and rate; each fine-tune is evaluated on 200 selection scenes (seed 3000) of its shift and of the base
+# task. Runs in the workspace of pretrain_base_rounds.sh after `nsl study run scripts/experiments/protocol_rounds.toml`.
+# About 1.5 minutes per shift on 2 cores; evaluation records go to $NSL_HOME/protocol-mc/*.json.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+NSL=${NSL:-.venv/bin/nsl}
+OUT="${NSL_HOME:-$HOME/.nsl}/protocol-mc"
+mkdir -p "$OUT"
+BASE="--data grasp-base-oracle=0.175 --data grasp-base-noisy=0.075 --data grasp-base-random=0.075
+      --data grasp-rounds-1:4000=0.01945 --data grasp-rounds-2:8000=0.03889 --data grasp-rounds-3:12000=0.05833
+      --data grasp-rounds-4:12000=0.05833"
+for s in harsh_lighting transparent_objects@0.8 checkerboard_backing@0.4 extend_gripper@2 offset_gripper@0.25; do
+  sl=$(echo "$s" | tr '+@_' '---')
+  $NSL train --init ckpt:rounds-r4@6000 --steps 1000 $BASE --data "protocol-rounds-$sl-by-base:800=0.5" \
+    --n-step 8 --crop 2 --checkpoint-every 500 --name "mcft-$sl"
+  [ -s "$OUT/$sl.json" ] || $NSL eval --checkpoint "ckpt:mcft-$sl@latest" --shift "$s,base" --episodes 200 \
+    --workers 2 --seed 3000 --json > "$OUT/$sl.json"
+done
