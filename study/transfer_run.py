@@ -294,14 +294,14 @@ def prepare_curricula(name: str, seeds: tuple[int, ...] | None = None):
     seeds = tuple(seeds) if seeds else default_seeds(plan)
     overlap = sorted(set(seeds) & set(plan.seeds))
     if overlap:
-        raise ConfigError(f"--seeds {list(seeds)} repeat the matrix's own seeds {overlap}; following a curriculum "
-                          "with them would rerun the matrix's runs, so choose others")
+        raise ConfigError(f"--seed {','.join(map(str, seeds))} repeats the matrix's own seeds {overlap}; following a "
+                          "curriculum with them would rerun the matrix's runs, so choose others")
     curriculum = build_curriculum(matrix)
     cplan = CurriculaPlan(name, seeds, {t: dict(getattr(curriculum, t).parent) for t in TREES})
     saved = folder(name) / PLAN_FILE
     if saved.is_file() and json.loads(saved.read_text()) != json.loads(json.dumps(cplan.to_dict())):
         raise ConfigError(f"the curricula of transfer {name!r} were started with other trees or seeds ({saved}); "
-                          "use the same --seeds to resume")
+                          "use the same --seed to resume")
     study = _study_plan(plan)
     units = build_curricula_units(plan, cplan, study.base, actions.base_sources(study), _ft_lr(study.base))
     return plan, cplan, units, unit_graph(units)

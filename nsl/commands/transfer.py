@@ -42,8 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                "task's transfer depends on how its source was reached. Resumable; writes "
                                "$NSL_HOME/transfers/NAME/curricula/curricula.md (docs/transfer.md).")
     c.add_argument("name", help="a transfer whose matrix is complete")
-    c.add_argument("--seeds", type=_seed_list, default=None,
-                   help="comma-separated training seeds (default: as many as the matrix's, after its highest)")
+    c.add_argument("--seed", type=_seed_list, default=None,
+                   help="training seeds, comma-separated, e.g. 2,3 (default: as many as the matrix's, after its "
+                        "highest)")
     add_workers(c, help="units run at once, each in its own process (1: one unit at a time, using every core)")
     c.add_argument("--quiet", action="store_true", help="no progress bars")
     add_json(c, "the measured and predicted costs")
@@ -55,9 +56,9 @@ def _seed_list(text: str) -> tuple[int, ...]:
     try:
         seeds = tuple(int(v) for v in text.split(","))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of seeds, e.g. 2,3") from None
+        raise argparse.ArgumentTypeError(f"--seed {text!r} is not a comma-separated list of seeds, e.g. 2,3") from None
     if not seeds or min(seeds) < 0 or len(set(seeds)) != len(seeds):
-        raise argparse.ArgumentTypeError(f"{text!r}: give distinct seeds >= 0, e.g. 2,3")
+        raise argparse.ArgumentTypeError(f"--seed {text!r}: give distinct seeds >= 0, e.g. 2,3")
     return seeds
 
 
@@ -111,7 +112,7 @@ def _curricula(args: argparse.Namespace) -> int:
 
     from nsl.study import run_curricula, status_lines
 
-    status, out = run_curricula(args.name, args.seeds, workers=args.workers, progress=not args.quiet)
+    status, out = run_curricula(args.name, args.seed, workers=args.workers, progress=not args.quiet)
     if args.json:
         print(json.dumps({k: str(v) if hasattr(v, "is_file") else v for k, v in out.items()}, sort_keys=True))
         return 0

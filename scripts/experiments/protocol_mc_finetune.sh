@@ -6,10 +6,20 @@
 # same steps and rate; each fine-tune is evaluated on 200 selection scenes (seed 3000) of its shift and of the base
 # task. Runs in the workspace of pretrain_base_rounds.sh after `nsl study run scripts/experiments/protocol_rounds.toml`.
 # About 1.5 minutes per shift on 2 cores; evaluation records go to $NSL_HOME/protocol-mc/*.json.
+#
+#   bash scripts/experiments/protocol_mc_finetune.sh [NAME OPTION...]
+#
+# With arguments, NAME names the variant (runs NAME-SHIFT, records in $NSL_HOME/protocol-NAME/) and the options
+# replace "--n-step 8 --crop 2" (a later --steps overrides the 1,000 steps), e.g. `mcn8 --n-step 8` for Monte-Carlo
+# returns at the default crop.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 NSL=${NSL:-.venv/bin/nsl}
-OUT="${NSL_HOME:-$HOME/.nsl}/protocol-mc"
+VARIANT=${1:-mcft}
+[ $# -gt 0 ] && shift
+OPTIONS=("$@")
+[ ${#OPTIONS[@]} -gt 0 ] || OPTIONS=(--n-step 8 --crop 2)
+OUT="${NSL_HOME:-$HOME/.nsl}/protocol-$([ "$VARIANT" = mcft ] && echo mc || echo "$VARIANT")"
 mkdir -p "$OUT"
 BASE="--data grasp-base-oracle=0.175 --data grasp-base-noisy=0.075 --data grasp-base-random=0.075
       --data grasp-rounds-1:4000=0.01945 --data grasp-rounds-2:8000=0.03889 --data grasp-rounds-3:12000=0.05833
@@ -17,7 +27,7 @@ BASE="--data grasp-base-oracle=0.175 --data grasp-base-noisy=0.075 --data grasp-
 for s in harsh_lighting transparent_objects@0.8 checkerboard_backing@0.4 extend_gripper@2 offset_gripper@0.25; do
   sl=$(echo "$s" | tr '+@_' '---')
   $NSL train --init ckpt:rounds-r4@6000 --steps 1000 $BASE --data "protocol-rounds-$sl-by-base:800=0.5" \
-    --n-step 8 --crop 2 --checkpoint-every 500 --name "mcft-$sl"
-  [ -s "$OUT/$sl.json" ] || $NSL eval --checkpoint "ckpt:mcft-$sl@latest" --shift "$s,base" --episodes 200 \
+    --checkpoint-every 500 "${OPTIONS[@]}" --name "$VARIANT-$sl"
+  [ -s "$OUT/$sl.json" ] || $NSL eval --checkpoint "ckpt:$VARIANT-$sl@latest" --shift "$s,base" --episodes 200 \
     --workers 2 --seed 3000 --json > "$OUT/$sl.json"
 done

@@ -96,8 +96,8 @@ def test_curricula_of_the_mini_transfer_through_the_cli(mini_run, tmp_path, caps
     assert "no transfer named 'nope'" in capsys.readouterr().err
     assert run_cli("transfer", "run", str(path), "--quiet") == 0
     capsys.readouterr()
-    assert run_cli("transfer", "curricula", "xmini", "--seeds", "0") == 2
-    assert "repeat the matrix's own seeds [0]" in capsys.readouterr().err
+    assert run_cli("transfer", "curricula", "xmini", "--seed", "0") == 2
+    assert "repeats the matrix's own seeds [0]" in capsys.readouterr().err
     assert run_cli("transfer", "curricula", "xmini", "--quiet", "--json") == 0
     out = json.loads(capsys.readouterr().out)
     folder = mini_run / "transfers" / "xmini" / "curricula"
@@ -114,5 +114,5 @@ def test_curricula_of_the_mini_transfer_through_the_cli(mini_run, tmp_path, caps
     # running again trains nothing; other seeds after a start are refused
     assert run_cli("transfer", "curricula", "xmini", "--quiet") == 0
     assert "0 left" in capsys.readouterr().out
-    assert run_cli("transfer", "curricula", "xmini", "--seeds", "5") == 2
-    assert "use the same --seeds to resume" in capsys.readouterr().err
+    assert run_cli("transfer", "curricula", "xmini", "--seed", "5") == 2
+    assert "use the same --seed to resume" in capsys.readouterr().err
