@@ -191,7 +191,8 @@ def advantage(ft_auc: Mapping[int, float], scratch_auc: Mapping[int, float], flo
     return Advantage(mean, _t_interval(values), per_seed, tuple(floored))
 
 
-def _t_interval(values: Sequence[float]) -> tuple[float, float] | None:
+def t_interval(values: Sequence[float]) -> tuple[float, float] | None:
+    """The 95% Student-t interval of the mean of ``values`` (None for fewer than two)."""
     if len(values) < 2:
         return None
     from scipy import stats
@@ -200,4 +201,10 @@ def _t_interval(values: Sequence[float]) -> tuple[float, float] | None:
     mean = sum(values) / n
     sd = math.sqrt(sum((v - mean) ** 2 for v in values) / (n - 1))
     half = float(stats.t.ppf(0.975, n - 1)) * sd / math.sqrt(n)
-    return (max(0.0, mean - half), mean + half)
+    return (mean - half, mean + half)
+
+
+def _t_interval(values: Sequence[float]) -> tuple[float, float] | None:
+    """:func:`t_interval` clipped at 0: an advantage is a ratio of areas."""
+    ci = t_interval(values)
+    return None if ci is None else (max(0.0, ci[0]), ci[1])

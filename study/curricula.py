@@ -29,7 +29,6 @@ Files in ``$NSL_HOME/transfers/X/curricula/``: ``plan.json`` (the trees and seed
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -127,16 +126,10 @@ def build_curricula_units(plan: TransferPlan, cplan: CurriculaPlan, base_ref: st
 # --- measurement ----------------------------------------------------------------------------------------------------
 
 def _mean_t(values: list[float]) -> tuple[float | None, tuple[float, float] | None]:
-    if not values:
-        return None, None
-    mean = sum(values) / len(values)
-    if len(values) < 2:
-        return mean, None
-    from scipy import stats
+    """The mean and its 95% Student-t interval (None, None for no values)."""
+    from nsl.curriculum import t_interval
 
-    sd = math.sqrt(sum((v - mean) ** 2 for v in values) / (len(values) - 1))
-    half = float(stats.t.ppf(0.975, len(values) - 1)) * sd / math.sqrt(len(values))
-    return mean, (mean - half, mean + half)
+    return (sum(values) / len(values), t_interval(values)) if values else (None, None)
 
 
 def measure(plan: TransferPlan, cplan: CurriculaPlan, matrix, auc, last) -> dict[str, Any]:
