@@ -5,6 +5,7 @@ reach into the modules)::
 
     EnvConfig, GraspEnv, ENV_VERSION            # the task
     SHIFT_NAMES, ShiftSpec, parse_shift, parse_shift_list   # the shift suite
+    STUDY_SEVERITIES, STUDY_SHIFTS              # the five at the severities calibrated to ckpt:base
     Policy, scripted_policy                     # random, oracle[:NOISE]
     Episode, episode_seeds, run_episodes, make_envs, collect_episodes
     render_gallery                              # `nsl render`
@@ -30,7 +31,8 @@ _EXPORTS = {
     "parallel": ("collect_episodes",),
     "policies": ("Policy", "scripted_policy"),
     "rollout": ("Episode", "episode_seeds", "make_envs", "run_episodes"),
-    "shifts": ("SHIFT_NAMES", "SHIFTS", "ShiftSpec", "parse_shift", "parse_shift_list"),
+    "shifts": ("SHIFT_NAMES", "SHIFTS", "STUDY_SEVERITIES", "STUDY_SHIFTS", "ShiftSpec", "parse_shift",
+               "parse_shift_list"),
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 

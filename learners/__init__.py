@@ -7,6 +7,7 @@ Public surface (other folders import these from ``nsl.learners`` only)::
     cem_maximize, noise_from_generator, noise_from_rngs
     Learner, update, bellman_target                    # one QT-Opt step
     train, TrainResult                                 # the loop: pre-training and fine-tuning
+    inherited_settings                                 # what a fine-tune keeps from its parent (n-step, crop)
     Sampler, ArraySampler                              # the data contract and an in-memory sampler
     Checkpoint, load_checkpoint, save_checkpoint, checkpoint_config, checkpoint_id, read_config
     CEMPolicy, load_policy                             # a checkpoint acting in the collectors
@@ -22,7 +23,7 @@ from .networks import QNetwork
 from .policy import CEMPolicy, load_policy
 from .qtopt import Learner, bellman_target, update
 from .sampler import ArraySampler, Sampler
-from .train import FINAL_DIR, TrainResult, train
+from .train import FINAL_DIR, TrainResult, inherited_settings, train
 
 __all__ = [
     "cem_maximize", "full_actions", "noise_from_generator", "noise_from_rngs",
@@ -30,5 +31,5 @@ __all__ = [
     "checkpoint_config", "checkpoint_id", "load_checkpoint", "read_config", "save_checkpoint",
     "METHODS", "CemConfig", "NetConfig", "TrainConfig", "QNetwork", "CEMPolicy", "load_policy",
     "Learner", "bellman_target", "update", "ArraySampler", "Sampler",
-    "FINAL_DIR", "TrainResult", "train",
+    "FINAL_DIR", "TrainResult", "inherited_settings", "train",
 ]

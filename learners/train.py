@@ -48,7 +48,7 @@ from nsl.errors import ConfigError
 from nsl.workspace import atomic_write_bytes
 
 from .checkpoint import (Checkpoint, checkpoint_config, checkpoint_id, load_checkpoint, load_trainer_state,
-                         save_checkpoint, write_json, TRAINER_FILE)
+                         read_config, save_checkpoint, write_json, TRAINER_FILE)
 from .config import FINE_TUNE_LR_FACTOR, METHODS, NetConfig, TrainConfig
 from .networks import QNetwork, grow_column, reinit_head, shrink_perturb
 from .policy import CEMPolicy
@@ -74,6 +74,20 @@ class TrainResult:
     stopped_early: bool  # eval_fn asked to stop
     metrics: dict[str, float] = field(default_factory=dict)  # the last logged row
     evals: list[dict[str, Any]] = field(default_factory=list)  # eval_fn results of this invocation
+
+
+INHERITED = ("n_step", "augment_crop")  # how the parent read its data: a fine-tune keeps it unless told otherwise
+
+
+def inherited_settings(init_checkpoint: str | Path) -> dict[str, Any]:
+    """The parent's training settings a fine-tune keeps unless told otherwise: its n-step horizon and crop.
+
+    A parent trained on Monte-Carlo-like returns (``n_step`` 8) and fine-tuned on one-step targets changes
+    what its Q-values mean in the first steps of the fine-tune; measured in docs/experiments.md.
+    """
+    training = read_config(Path(init_checkpoint))["training"]
+    defaults = TrainConfig()
+    return {k: training.get(k, getattr(defaults, k)) for k in INHERITED}
 
 
 def resolve_lr(config: TrainConfig, method: str, parent: Checkpoint | None) -> float:

@@ -219,7 +219,7 @@ def _train(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
     from nsl import code_version, workspace
     from nsl.catalog import Catalog
     from nsl.datasets import api
-    from nsl.learners import TrainConfig, train
+    from nsl.learners import TrainConfig, inherited_settings, train
 
     p = unit.params
     mix = _data_mix(p)
@@ -234,7 +234,8 @@ def _train(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
         train_view, held_out = api.episode_split(api.open_view(mix[-1][0]), monitor_cfg["holdout"])
         sources[-1] = (train_view, mix[-1][1])
     config = TrainConfig(steps=p["steps"], seed=p["seed"], checkpoint_every=min(p["checkpoint_every"], p["steps"]),
-                         eval_every=monitor_cfg["every"] if monitor_cfg else 0, lr=p.get("lr"))  # lr: None = default
+                         eval_every=monitor_cfg["every"] if monitor_cfg else 0, lr=p.get("lr"),  # lr: None = default
+                         **(inherited_settings(parent.path) if parent else {}))  # the parent's n-step and crop
     sampler = api.make_sampler(sources, n_step=config.n_step, gamma=config.gamma)
     run_dir = workspace.runs_dir() / p["checkpoint"]
     run_dir.mkdir(parents=True, exist_ok=True)

@@ -20,7 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                      help="comma-separated checkpoint refs, e.g. ckpt:base,ckpt:harsh@best")
     who.add_argument("--policy", default=None, metavar="REF[,REF]",
                      help="comma-separated policies: random | oracle[:NOISE] | ckpt:NAME (default: oracle)")
-    p.add_argument("--shift", default="base", help="comma-separated shift specs, or 'all'")
+    p.add_argument("--shift", default="base", help="comma-separated shift specs, or 'all' (base and the five at "
+                   "severity 1), or 'study' (base and the five at the severities calibrated to ckpt:base)")
     p.add_argument("--severity", type=float, default=None, help="severity for shifts given without @X")
     p.add_argument("--episodes", type=int, default=100, help="episodes per shift")
     add_workers(p)

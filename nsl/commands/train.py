@@ -52,11 +52,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--shrink-perturb", default=None, metavar="ALPHA,SIGMA",
                    help="with --init: start from ALPHA * the parent's weights + SIGMA * a fresh initialisation "
                         "(shrink and perturb, Ash and Adams 2020), e.g. 0.8,0.01; recorded in the run's config")
-    p.add_argument("--n-step", type=int, default=1, metavar="N",
+    p.add_argument("--n-step", type=int, default=None, metavar="N",
                    help="n-step returns: bootstrap after up to N steps of the data's own actions, so fewer "
-                        "Bellman maximisations stack up offline")
+                        "Bellman maximisations stack up offline (default: 1; fine-tuning: the parent's)")
     p.add_argument("--crop", type=int, default=None, metavar="PIXELS",
-                   help="random-shift augmentation in pixels (default: 4; 0 keeps the colour jitter only)")
+                   help="random-shift augmentation in pixels (default: 4; fine-tuning: the parent's; 0 keeps the "
+                        "colour jitter only)")
     p.add_argument("--net", action="append", default=[], metavar="FIELD=VALUE",
                    help="architecture for pre-training (a field of NetConfig; repeatable), e.g. --net pool=spatial "
                         "--net hidden=32 --net action_dims=0,1,3; fine-tuning keeps the parent's")
@@ -157,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
 
 def train(*, data: list[str], steps: int, name: str, init: str | None = None, method: str | None = None,
           lr: float | None = None, lr_decay: int = 0, weight_decay: float = 0.0, batch_size: int = 64, seed: int = 0,
-          checkpoint_every: int = 2000, no_augment: bool = False, conservative: float = 0.0, n_step: int = 1,
+          checkpoint_every: int = 2000, no_augment: bool = False, conservative: float = 0.0, n_step: int | None = None,
           shrink_perturb: str | None = None, crop: int | None = None, net: list[str] = (), eval_every: int = 0,
           eval_episodes: int = 50, base_episodes: int = 0, target_shift: str | None = None, patience: int = 5,
           criterion: str = "eval", holdout: float = 0.1, workers: int = 1):
@@ -170,7 +171,7 @@ def train(*, data: list[str], steps: int, name: str, init: str | None = None, me
     from nsl.catalog import Catalog
     from nsl.datasets import api
     from nsl.errors import ConfigError
-    from nsl.learners import TrainConfig
+    from nsl.learners import TrainConfig, inherited_settings
     from nsl.learners import train as train_learner
     from nsl.commands._refs import dataset_uses, resolve_init
 
@@ -199,6 +200,9 @@ def train(*, data: list[str], steps: int, name: str, init: str | None = None, me
     if eval_every and criterion != "eval":
         train_view, held_out = api.episode_split(target_view, holdout)
         sources[-1] = (train_view, mix[-1][1])
+    inherited = inherited_settings(parent.path) if parent else {}  # a fine-tune keeps the parent's n-step and crop
+    n_step = n_step if n_step is not None else inherited.get("n_step", 1)
+    crop = crop if crop is not None else inherited.get("augment_crop")
     config = TrainConfig(steps=steps, batch_size=batch_size, lr=lr, seed=seed,
                          checkpoint_every=checkpoint_every, eval_every=eval_every,
                          conservative=conservative, n_step=n_step, lr_decay=lr_decay,

@@ -23,7 +23,7 @@ from nsl.commands.eval import evaluate
 from nsl.study.reference import STUDY_DROPS
 
 GRID = {
-    "harsh_lighting": (1.0, 0.75, 0.5),
+    "harsh_lighting": (2.0, 1.5, 1.0, 0.75, 0.5),
     "checkerboard_backing": (1.0, 0.6, 0.4, 0.25),
     "transparent_objects": (1.0, 0.8, 0.6, 0.45),
     "extend_gripper": (1.0, 1.5, 2.0, 2.5, 3.0),
@@ -46,8 +46,14 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", type=Path, default=Path("calibration.json"))
     ap.add_argument("--only", nargs="*", choices=sorted(GRID), help="measure only these shifts")
+    ap.add_argument("--severities", type=lambda t: tuple(float(x) for x in t.split(",")),
+                    help="with one --only shift: measure these severities (comma-separated) instead of its grid")
     args = ap.parse_args()
     grid = {k: v for k, v in GRID.items() if not args.only or k in args.only}
+    if args.severities:
+        if len(grid) != 1:
+            ap.error("--severities needs exactly one shift in --only")
+        grid = {k: args.severities for k in grid}
 
     specs = ["base"] + [f"{name}@{s:g}" for name, g in grid.items() for s in g]
     res = evaluate([args.checkpoint], shift=",".join(specs), episodes=args.episodes, seed=args.seed,

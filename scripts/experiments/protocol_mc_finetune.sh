@@ -11,7 +11,10 @@
 #
 # With arguments, NAME names the variant (runs NAME-SHIFT, records in $NSL_HOME/protocol-NAME/) and the options
 # replace "--n-step 8 --crop 2" (a later --steps overrides the 1,000 steps), e.g. `mcn8 --n-step 8` for Monte-Carlo
-# returns at the default crop.
+# returns at the default crop. SHIFTS="harsh_lighting offset_gripper@0.25" restricts a variant to some shifts (a
+# shift's data must exist: protocol-rounds-SHIFT-by-base), EPISODES=400 evaluates on more scenes (default 200), and
+# BASE_HALF=scripted makes the base half the 8,000 scripted episodes alone, at their relative pre-training weights
+# (what a fresh workspace can collect again; the study plans use it).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 NSL=${NSL:-.venv/bin/nsl}
@@ -24,10 +27,12 @@ mkdir -p "$OUT"
 BASE="--data grasp-base-oracle=0.175 --data grasp-base-noisy=0.075 --data grasp-base-random=0.075
       --data grasp-rounds-1:4000=0.01945 --data grasp-rounds-2:8000=0.03889 --data grasp-rounds-3:12000=0.05833
       --data grasp-rounds-4:12000=0.05833"
-for s in harsh_lighting transparent_objects@0.8 checkerboard_backing@0.4 extend_gripper@2 offset_gripper@0.25; do
+[ "${BASE_HALF:-}" = scripted ] && BASE="--data grasp-base-oracle=0.26923 --data grasp-base-noisy=0.11538
+      --data grasp-base-random=0.11538"
+for s in ${SHIFTS:-harsh_lighting transparent_objects@0.8 checkerboard_backing@0.4 extend_gripper@2 offset_gripper@0.25}; do
   sl=$(echo "$s" | tr '+@_' '---')
   $NSL train --init ckpt:rounds-r4@6000 --steps 1000 $BASE --data "protocol-rounds-$sl-by-base:800=0.5" \
     --checkpoint-every 500 "${OPTIONS[@]}" --name "$VARIANT-$sl"
-  [ -s "$OUT/$sl.json" ] || $NSL eval --checkpoint "ckpt:$VARIANT-$sl@latest" --shift "$s,base" --episodes 200 \
+  [ -s "$OUT/$sl.json" ] || $NSL eval --checkpoint "ckpt:$VARIANT-$sl@latest" --shift "$s,base" --episodes "${EPISODES:-200}" \
     --workers 2 --seed 3000 --json > "$OUT/$sl.json"
 done

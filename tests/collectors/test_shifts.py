@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nsl.collectors import EnvConfig, GraspEnv, ShiftSpec, parse_shift
+from nsl.collectors import STUDY_SEVERITIES, EnvConfig, GraspEnv, ShiftSpec, parse_shift, parse_shift_list
 from nsl.errors import ConfigError, IncompatibleVersionError, UnknownReferenceError
 
 
@@ -110,6 +110,15 @@ def test_spec_json_round_trip_and_version():
     with pytest.raises(IncompatibleVersionError, match="version 99"):
         ShiftSpec.from_dict(d)
     assert parse_shift("base").shifts == ()
+
+
+def test_study_list_is_base_and_the_five_at_their_calibrated_severities():
+    specs = parse_shift_list("study")
+    assert specs[0] == parse_shift("base") and len(specs) == 6
+    assert {s.shifts[0].name: s.shifts[0].severity for s in specs[1:]} == STUDY_SEVERITIES
+    assert set(STUDY_SEVERITIES) == {n for n in parse_shift_list("all")[1:] for n in [n.shifts[0].name]}
+    # severity 1 keeps its meaning: a calibrated shift is written with its @X
+    assert parse_shift_list("harsh_lighting@2")[0] == specs[1] and specs[1].name == "harsh_lighting@2"
 
 
 @pytest.mark.parametrize("text,error,match", [

@@ -146,6 +146,16 @@ def test_training_records_crop_and_n_step_and_refuses_data_from_an_older_environ
     assert (training["augment_crop"], training["augment_colour"], training["n_step"]) == (2, 0.1, 3)
     assert training["weight_decay"] == 1e-4
     assert (config["data"]["n_step"], config["data"]["gamma"]) == (3, training["gamma"])
+    # A fine-tune keeps how its parent read the data (n-step returns, crop) unless told otherwise.
+    assert run_cli("train", "--data", "grasp-base=0.5", "--data", "grasp-harsh=0.5", "--init", "ckpt:crop-tiny",
+                   "--steps", "2", "--name", "crop-tiny-ft") == 0
+    assert run_cli("train", "--data", "grasp-base=0.5", "--data", "grasp-harsh=0.5", "--init", "ckpt:crop-tiny",
+                   "--steps", "2", "--name", "crop-tiny-ft1", "--n-step", "1", "--crop", "4") == 0
+    with Catalog() as cat:
+        kept, told = (json.loads((Path(cat.resolve_checkpoint(f"ckpt:{n}@latest").path) / "config.json").read_text())
+                      for n in ("crop-tiny-ft", "crop-tiny-ft1"))
+    assert (kept["training"]["n_step"], kept["training"]["augment_crop"], kept["data"]["n_step"]) == (3, 2, 3)
+    assert (told["training"]["n_step"], told["training"]["augment_crop"], told["data"].get("n_step", 1)) == (1, 4, 1)
     capsys.readouterr()
     assert run_cli("train", "--data", "grasp-base", "--steps", "2", "--name", "x", "--n-step", "0") == 2
     err = capsys.readouterr().err.strip()

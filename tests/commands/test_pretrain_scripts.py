@@ -6,6 +6,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from tests.conftest import recorded_calls
+
 SCRIPTS = Path(__file__).resolve().parents[2] / "scripts"
 
 
@@ -40,18 +42,7 @@ def test_iterated_recipe_collects_at_most_10000_episodes_and_trains_on_all_of_th
 
 def test_rounds_recipe_keeps_to_50000_episodes_and_its_final_runs_read_every_round(tmp_path):
     """Run pretrain_base_rounds.sh with a recording stand-in for `nsl`: the commands it would run."""
-    import os
-    import shlex
-    import subprocess
-
-    log = tmp_path / "calls"
-    fake = tmp_path / "nsl"
-    fake.write_text(f'#!/usr/bin/env bash\nprintf "%q " "$@" >> {log}\necho >> {log}\n')
-    fake.chmod(0o755)
-    env = {**os.environ, "NSL": str(fake), "NSL_HOME": str(tmp_path / "home"), "SEEDS": "0 1 2"}
-    subprocess.run(["bash", str(SCRIPTS / "experiments" / "pretrain_base_rounds.sh")], env=env, check=True,
-                   capture_output=True)
-    calls = [shlex.split(line) for line in log.read_text().splitlines()]
+    calls = recorded_calls(SCRIPTS / "experiments" / "pretrain_base_rounds.sh", tmp_path, SEEDS="0 1 2")
 
     def opt(call, flag):
         return [call[i + 1] for i, a in enumerate(call) if a == flag]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from nsl.collectors import STUDY_SHIFTS
 from nsl.errors import ConfigError, UnknownReferenceError
 from nsl.study import SHIPPED, build_units, load_plan, unit_graph
 from nsl.study.units import BaseSource, order
@@ -38,7 +39,7 @@ def _outputs(home) -> list[str]:
     (("criteria = [\"eval\", \"softopc\", \"auc\", \"td\"]", "criteria = [\"eval\", \"opc\"]"),
      "unknown stopping criterion 'opc'"),
     (("source = \"plan\"\n", "source = \"checkpoint\"\n"),
-     "base data grasp-base-oracle@v1 (sha256:396814441b45...) of ckpt:base is not in $NSL_HOME and the plan has no "
+     "base data grasp-base-oracle@v1 (sha256:34692b25313d...) of ckpt:base is not in $NSL_HOME and the plan has no "
      "recipe"),
     (("[eval]\nepisodes = 4", "[eval]\nepisodes = 4\nepisode = 5"), "plan [eval] has unknown setting(s) ['episode']"),
 ])
@@ -90,9 +91,15 @@ def test_shipped_plans_parse_and_build_a_graph(name):
     assert names.index(f"base-data:{plan.base_data.datasets[0].name}") < names.index(
         next(n for n in names if n.startswith("train:")))
     if name != "tiny":
-        assert plan.base_data.source == "checkpoint" and plan.base_data.verify is False  # see the plans' comment
-        assert {d.name for d in plan.base_data.datasets} == {"grasp-base-oracle", "grasp-base-noisy",
-                                                            "grasp-base-random"}
+        # the shipped base's scripted data, at the weights its training gave them (see the plans' comment)
+        assert plan.base_data.source == "plan"
+        from nsl.learners import load_checkpoint
+        from nsl.study.actions import resolve_checkpoint
+        recorded = {src["ref"].split("@")[0]: src["weight"]
+                    for src in load_checkpoint(resolve_checkpoint("ckpt:base").path).config["data"]["sources"]}
+        assert {d.name: d.weight for d in plan.base_data.datasets} == pytest.approx(
+            {n: w for n, w in recorded.items() if n.startswith("grasp-base-")}, abs=1e-3)
+        assert plan.shifts == STUDY_SHIFTS
     if name in ("full", "paper"):
         assert plan.collect.episodes == 800 and plan.finetune.tiers == (25, 50, 100, 200, 400, 800)
         assert len(plan.shifts) == 5 and len(plan.continual.sequence) == 5
