@@ -14,27 +14,29 @@ $NSL render --shift all --episodes 4 --out "$OUT/gallery.png"
 echo "== 2. Scripted policies on every shift (test objects, 100 episodes each, 95% Wilson intervals)"
 $NSL eval --policy random,oracle:0.5,oracle --shift all --episodes 100 --workers $W --markdown | tee "$OUT/scripted.md"
 
-echo "== 3. Collect a base dataset and a small harsh-lighting target dataset (versioned LeRobot v3.0 datasets)"
-$NSL collect --shift base --episodes 600 --policy oracle:1.0 --data demo-base --workers $W --batch-size 4
-$NSL collect --shift harsh_lighting --episodes 100 --policy oracle:1.0 --data demo-harsh --workers $W --batch-size 4
-$NSL dataset tiers demo-harsh --sizes 25,50,100
+echo "== 3. Base-task data, and harsh-lighting data that the base policy collects itself (the study's protocol)"
+NSL=$NSL bash scripts/collect_base_data.sh   # the 8,000 scripted episodes of the base's pre-training data
+$NSL collect --shift harsh_lighting@2 --episodes 800 --policy ckpt:base --epsilon 0.1 --data demo-harsh \
+  --workers $W --batch-size 8
+$NSL dataset tiers demo-harsh --sizes 100,200,400,800
 
 echo "== 4. Pre-train a Q-function offline on the base data (short, to show the command; the shipped base is next)"
-$NSL train --data demo-base --steps 1000 --name demo-base
+$NSL train --data grasp-base-oracle --steps 1000 --name demo-base
 
-echo "== 5. Fine-tune the shipped base policy (ckpt:base) on harsh lighting, 50/50 with base data, early stopping"
-$NSL train --data demo-base=0.5 --data demo-harsh=0.5 --init ckpt:base --steps 900 --name demo-harsh \
-  --eval-every 300 --eval-episodes 20 --base-episodes 20 --patience 2 --workers $W
+echo "== 5. Fine-tune the shipped base policy (ckpt:base) on its harsh-lighting data, 50/50 with base data"
+$NSL train --data grasp-base-oracle=0.27 --data grasp-base-noisy=0.115 --data grasp-base-random=0.115 \
+  --data demo-harsh=0.5 --init ckpt:base --steps 1000 --name demo-harsh \
+  --eval-every 250 --eval-episodes 20 --base-episodes 20 --patience 2 --workers $W
 
 echo "== 6. Evaluate the base and the fine-tuned checkpoints on the same scenes (paired)"
-$NSL eval --checkpoint ckpt:base,ckpt:demo-harsh@best --shift base,harsh_lighting --episodes 50 --workers $W
+$NSL eval --checkpoint ckpt:base,ckpt:demo-harsh@best --shift base,harsh_lighting@2 --episodes 100 --workers $W
 
 echo "== 7. A two-stage continual run from the base policy: harsh lighting, then transparent objects"
-$NSL continual --sequence harsh_lighting,transparent_objects --init ckpt:base --base-data demo-base \
-  --episodes 60 --steps 300 --eval-episodes 30 --workers $W --name demo-continual
+$NSL continual --sequence harsh_lighting@2,transparent_objects@0.8 --init ckpt:base --base-data grasp-base-oracle \
+  --episodes 200 --steps 300 --eval-episodes 30 --workers $W --name demo-continual
 
 echo "== 8. Lineage of the last continual stage, and reports"
-$NSL catalog lineage ckpt:demo-continual-s2-transparent-objects@latest | tee "$OUT/lineage.txt"
+$NSL catalog lineage ckpt:demo-continual-s2-transparent-objects-0.8@latest | tee "$OUT/lineage.txt"
 $NSL report demo-harsh
 $NSL report demo-continual
 echo "demo outputs: $OUT, $HOME_DIR/runs/demo-harsh/report, $HOME_DIR/runs/demo-continual/report"

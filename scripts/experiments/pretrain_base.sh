@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Reproduces the base checkpoint that ships in nsl/assets/base (ckpt:base; reported in README.md, "The shipped
-# base policy", and docs/experiments.md, "The shipped base policy"). About 6 minutes of collection and under an
-# hour of training on 2 cores. Outputs go to $NSL_HOME. Every step resumes when run again. Then
-# `bash scripts/experiments/pretrain_base.sh ship` copies the step-6000 checkpoint into nsl/assets/base.
+# Reproduces the one-step base that shipped before the rounds base (base-flat@6000: 70% on 200 reporting scenes;
+# docs/experiments.md, "The one-step base"). About 6 minutes of collection and under an hour of training on 2 cores.
+# Outputs go to $NSL_HOME. Every step resumes when run again. `bash scripts/experiments/pretrain_base.sh ship` would
+# copy its step-6000 checkpoint into nsl/assets/base in place of the shipped base.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 NSL=${NSL:-.venv/bin/nsl}
@@ -20,18 +20,4 @@ if [ "${1:-}" != "ship" ]; then
 fi
 
 # ship: the step-6000 checkpoint, its recipe, and the environment it was trained in.
-$PY - <<'EOF'
-import json, shutil
-from pathlib import Path
-
-from nsl import workspace
-from nsl.collectors import ENV_VERSION
-
-src, dst = workspace.runs_dir() / "base-flat" / "checkpoints" / "step-000006000", Path("nsl/assets/base")
-dst.mkdir(parents=True, exist_ok=True)
-for name in ("model.safetensors", "config.json"):
-    shutil.copyfile(src / name, dst / name)
-shutil.copyfile(workspace.runs_dir() / "base-flat" / "command.json", dst / "command.json")
-(dst / "env_version.txt").write_text(ENV_VERSION + "\n")
-print(f"shipped {src} to {dst}")
-EOF
+exec "$PY" scripts/experiments/ship_base.py base-flat 6000

@@ -17,9 +17,16 @@
 # to $NSL_HOME/rounds-times.tsv; the final command scores every seed on 1,000 selection scenes (seed 3000).
 #
 #   NSL_HOME=... [ROUNDS="4000 8000 12000 12000"] [SEEDS="0 1 2"] bash scripts/experiments/pretrain_base_rounds.sh
+#   NSL_HOME=... bash scripts/experiments/pretrain_base_rounds.sh ship   # copy rounds-r4@6000 into nsl/assets/base
+#
+# The shipped base (ckpt:base) is seed 0's rounds-r4@6000, chosen on the selection scenes; its command, code version
+# and dataset hashes are in nsl/assets/base/command.json.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 NSL=${NSL:-.venv/bin/nsl}
+if [ "${1:-}" = ship ]; then
+  exec "${PY:-.venv/bin/python}" scripts/experiments/ship_base.py rounds-r4 6000
+fi
 HOME_DIR="${NSL_HOME:-$HOME/.nsl}"
 ROUNDS=(${ROUNDS:-4000 8000 12000 12000})
 SEEDS=(${SEEDS:-0 1 2})
