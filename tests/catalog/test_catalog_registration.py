@@ -97,7 +97,8 @@ def test_catalog_commands_know_ckpt_base_in_an_empty_workspace(command, capsys):
     assert ("ok: 1 checkpoint(s)" if command == ["verify"] else "base@") in out
     if command == ["lineage"]:
         for d in record["data"]:
-            assert f"data: {d['dataset']}@v{d['version']} (not in this catalog, content {d['hash'][7:19]}), " \
+            tier = f":{d['tier']}" if d.get("tier") else ""  # a first-K view of the dataset
+            assert f"data: {d['dataset']}@v{d['version']}{tier} (not in this catalog, content {d['hash'][7:19]}), " \
                    f"weight {d['weight']:g}" in out
         assert "data: none recorded" not in out
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -91,7 +92,9 @@ def test_transfer_measures_every_pair_with_catalogued_runs(xmini, mini_run):
         assert len(cat.resolve_data("data:xmini-base-by-base").dataset.files) > 0  # collected by its recipe
     assert m["meta"]["checkpoints"]["harsh_lighting"]["id"] == harsh.id
     text = (xmini / "matrix.md").read_text()
-    assert "## Advantage A(row -> column)" in text and "Spearman rho: undefined (2 pairs" in text
+    # Two tasks give at most two (source, target) pairs: too few for a rank correlation. (A pair whose target
+    # episodes all succeed, or all fail, has no Q-ranking AUC and drops out.)
+    assert "## Advantage A(row -> column)" in text and re.search(r"Spearman rho: undefined \([12] pairs", text)
     assert (xmini / "curriculum.png").stat().st_size > 1000
 
 
