@@ -569,7 +569,7 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
              "## Challenge table (Table 5.1)", "", challenge_table(records), "",
              "## Fine-tuning by data size (Table 5.2)", "",
              f"Fine-tune all parameters from the base, batches 50/50 base data and the first K target episodes, "
-             f"25% of the base's learning rate, {plan['finetune']['steps']} steps, seeds "
+             f"25% of the base's learning rate and its n-step returns and crop, {plan['finetune']['steps']} steps, seeds "
              f"{', '.join(map(str, plan['finetune']['seeds']))} (pooled). Success on the shift:", "", tiers_table(records), ""]
     if "tiers" in figures:
         parts += [f"![fine-tuning by data size]({figures['tiers']})", ""]
