@@ -21,7 +21,7 @@ $NSL collect --shift harsh_lighting@2 --episodes 800 --policy ckpt:base --epsilo
 $NSL dataset tiers demo-harsh --sizes 100,200,400,800
 
 echo "== 4. Pre-train a Q-function offline on the base data (short, to show the command; the shipped base is next)"
-$NSL train --data grasp-base-oracle --steps 1000 --name demo-base
+$NSL train --data grasp-base-oracle --steps 1000 --n-step 8 --name demo-base
 
 echo "== 5. Fine-tune the shipped base policy (ckpt:base) on its harsh-lighting data, 50/50 with base data"
 $NSL train --data grasp-base-oracle=0.27 --data grasp-base-noisy=0.115 --data grasp-base-random=0.115 \
