@@ -102,9 +102,9 @@ def test_shipped_base_recovers_harsh_lighting_from_its_own_data(capsys):
     assert run_cli("eval", "--checkpoint", "ckpt:base,ckpt:plastic", "--shift", "base,harsh_lighting@2",
                    "--episodes", "200", "--workers", "2", "--seed", "2000", "--json") == 0
     out = json.loads(capsys.readouterr().out)
-    (base_before, harsh_before), (base_after, harsh_after) = (
-        (out["policies"][k]["results"][t]["success_rate"] for t in ("base", "harsh_lighting@2"))
-        for k in ("ckpt:base", "ckpt:plastic"))
+    (base_before, harsh_before), (base_after, harsh_after) = [
+        [out["policies"][k]["results"][t]["success_rate"] for t in ("base", "harsh_lighting@2")]
+        for k in ("ckpt:base", "ckpt:plastic")]
     assert harsh_after >= harsh_before + 0.15, out["policies"]
     assert out["paired"]["harsh_lighting@2"]["p_value"] < 0.01
     assert base_after >= base_before - 0.10, out["policies"]
