@@ -23,7 +23,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         sub, "train", help="pre-train (no --init) or fine-tune (--init CKPT) a Q-function offline",
         description="Offline QT-Opt on one or more dataset versions mixed by weight. Without --init this is "
                     "pre-training; with --init it fine-tunes from a catalogued checkpoint at 25% of its learning "
-                    "rate (the study's recipe: mix the target data 50/50 with the base data). Running the same "
+                    "rate, keeping its n-step returns and crop (the study's recipe: mix the target data 50/50 with "
+                    "the base data). Running the same "
                     "command again resumes from the last checkpoint. The final checkpoint (and, with early "
                     "stopping, every evaluated one) is registered in the catalog under --name.")
     p.add_argument("--data", action="append", required=True, metavar="REF[=WEIGHT]",
