@@ -14,7 +14,9 @@
 # returns at the default crop. SHIFTS="harsh_lighting offset_gripper@0.25" restricts a variant to some shifts (a
 # shift's data must exist: protocol-rounds-SHIFT-by-base), EPISODES=400 evaluates on more scenes (default 200), and
 # BASE_HALF=scripted makes the base half the 8,000 scripted episodes alone, at their relative pre-training weights
-# (what a fresh workspace can collect again; the study plans use it).
+# (what a fresh workspace can collect again; the study plans use it). BASE_HALF=own makes it the scripted episodes
+# at half their weight and 8,000 base-task episodes collected by the base itself with 10% random actions
+# (grasp-base-own, collected first if missing), as the rounds mixed scripted and learned-policy data.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 NSL=${NSL:-.venv/bin/nsl}
@@ -29,6 +31,12 @@ BASE="--data grasp-base-oracle=0.175 --data grasp-base-noisy=0.075 --data grasp-
       --data grasp-rounds-4:12000=0.05833"
 [ "${BASE_HALF:-}" = scripted ] && BASE="--data grasp-base-oracle=0.26923 --data grasp-base-noisy=0.11538
       --data grasp-base-random=0.11538"
+if [ "${BASE_HALF:-}" = own ]; then
+  $NSL collect --shift base --episodes 8000 --policy ckpt:rounds-r4@6000 --epsilon 0.1 --data grasp-base-own --seed 20 \
+    --workers 2 --batch-size 8  # resumes, or does nothing, when it exists
+  BASE="--data grasp-base-oracle=0.175 --data grasp-base-noisy=0.075 --data grasp-base-random=0.075
+        --data grasp-base-own=0.175"
+fi
 for s in ${SHIFTS:-harsh_lighting transparent_objects@0.8 checkerboard_backing@0.4 extend_gripper@2 offset_gripper@0.25}; do
   sl=$(echo "$s" | tr '+@_' '---')
   $NSL train --init ckpt:rounds-r4@6000 --steps 1000 $BASE --data "protocol-rounds-$sl-by-base:800=0.5" \
