@@ -16,7 +16,10 @@
 # BASE_HALF=scripted makes the base half the 8,000 scripted episodes alone, at their relative pre-training weights
 # (what a fresh workspace can collect again; the study plans use it). BASE_HALF=own makes it the scripted episodes
 # at half their weight and 8,000 base-task episodes collected by the base itself with 10% random actions
-# (grasp-base-own, collected first if missing), as the rounds mixed scripted and learned-policy data.
+# (grasp-base-own, collected first if missing), as the rounds mixed scripted and learned-policy data. EPSILON=0.3
+# replaces each shift's data with 800 episodes the base collects with that chance of a random action per step
+# (protocol-eps0.3-SHIFT-by-base, collected first, seed 5) instead of the study's 10%; TARGET_EPISODES=1600 collects
+# that many instead of the protocol's 800 (protocol-eps0.1-n1600-SHIFT-by-base, the same seed as the study's 800).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 NSL=${NSL:-.venv/bin/nsl}
@@ -39,7 +42,15 @@ if [ "${BASE_HALF:-}" = own ]; then
 fi
 for s in ${SHIFTS:-harsh_lighting transparent_objects@0.8 checkerboard_backing@0.4 extend_gripper@2 offset_gripper@0.25}; do
   sl=$(echo "$s" | tr '+@_' '---')
-  $NSL train --init ckpt:rounds-r4@6000 --steps 1000 $BASE --data "protocol-rounds-$sl-by-base:800=0.5" \
+  target="protocol-rounds-$sl-by-base:800"
+  if [ -n "${EPSILON:-}${TARGET_EPISODES:-}" ]; then
+    n=${TARGET_EPISODES:-800}
+    target="protocol-eps${EPSILON:-0.1}-$sl-by-base"
+    [ "$n" = 800 ] || target="protocol-eps${EPSILON:-0.1}-n$n-$sl-by-base"
+    $NSL collect --shift "$s" --episodes "$n" --policy ckpt:rounds-r4@6000 --epsilon "${EPSILON:-0.1}" \
+      --data "$target" --seed 5 --workers 2 --batch-size 8
+  fi
+  $NSL train --init ckpt:rounds-r4@6000 --steps 1000 $BASE --data "$target=0.5" \
     --checkpoint-every 500 "${OPTIONS[@]}" --name "$VARIANT-$sl"
   [ -s "$OUT/$sl.json" ] || $NSL eval --checkpoint "ckpt:$VARIANT-$sl@latest" --shift "$s,base" --episodes "${EPISODES:-200}" \
     --workers 2 --seed 3000 --json > "$OUT/$sl.json"
