@@ -76,6 +76,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                          "transitions (lower is better); the offline ones need no simulator")
     es.add_argument("--holdout", type=float, default=0.1,
                     help="fraction of the last dataset's episodes held out (its last ones) for the offline criteria")
+    es.add_argument("--eval-scenes", type=int, default=3000, metavar="SEED",
+                    help="the scenes of every evaluation, those of `nsl eval --seed SEED`: by default the selection "
+                         "scenes (3000), so the chosen step is reported on others (`nsl eval --seed 2000`)")
     add_workers(es, help="evaluation worker processes")
     p.set_defaults(func=run)
 
@@ -153,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
           n_step=args.n_step, shrink_perturb=args.shrink_perturb, crop=args.crop, net=args.net,
           eval_every=args.eval_every, eval_episodes=args.eval_episodes, base_episodes=args.base_episodes,
           target_shift=args.target_shift, patience=args.patience, criterion=args.criterion, holdout=args.holdout,
-          workers=args.workers)
+          eval_scenes=args.eval_scenes, workers=args.workers)
     return 0
 
 
@@ -162,7 +165,7 @@ def train(*, data: list[str], steps: int, name: str, init: str | None = None, me
           checkpoint_every: int = 2000, no_augment: bool = False, conservative: float = 0.0, n_step: int | None = None,
           shrink_perturb: str | None = None, crop: int | None = None, net: list[str] = (), eval_every: int = 0,
           eval_episodes: int = 50, base_episodes: int = 0, target_shift: str | None = None, patience: int = 5,
-          criterion: str = "eval", holdout: float = 0.1, workers: int = 1):
+          criterion: str = "eval", holdout: float = 0.1, eval_scenes: int = 3000, workers: int = 1):
     """Train (or resume) run ``name`` and catalogue its checkpoints; returns the final CheckpointEntry.
 
     The keyword arguments are those of ``nsl train`` (``data`` holds the
@@ -221,13 +224,13 @@ def train(*, data: list[str], steps: int, name: str, init: str | None = None, me
     if eval_every:
         monitor = _monitor(run_dir, target_shift, held_out, every=eval_every, episodes=eval_episodes,
                            base_episodes=base_episodes, patience=patience, criterion=criterion, holdout=holdout,
-                           workers=workers, gamma=config.gamma)
+                           seed=eval_scenes, workers=workers, gamma=config.gamma)
     result = train_learner(config, sampler, run_dir, init_checkpoint=parent.path if parent else None, method=method,
                            eval_fn=monitor, **({"net": net_config} if net_config is not None else {}))
     entry = _register(cat, name, result.checkpoint, parent, uses, target_shift)
     print(f"checkpoint ckpt:{name}@{result.step} ({entry.id[:12]}) -> {entry.path}")
     if monitor is not None:
-        _register_evaluated(cat, name, run_dir, parent, uses, target_shift)
+        _register_evaluated(cat, name, run_dir, parent, uses, target_shift, monitor.config.seed)
         best_step = monitor.stopper.best_step
         if best_step is None:
             best = "no step (every evaluation failed)"
@@ -242,7 +245,7 @@ def train(*, data: list[str], steps: int, name: str, init: str | None = None, me
 TRAIN_OPTIONS = ("data", "steps", "name", "init", "method", "lr", "lr_decay", "weight_decay", "batch_size", "seed",
                  "checkpoint_every", "no_augment", "conservative", "n_step", "shrink_perturb", "crop", "net",
                  "eval_every", "eval_episodes", "base_episodes", "target_shift", "patience", "criterion", "holdout",
-                 "workers")
+                 "eval_scenes", "workers")
 
 
 def _check_env_version(view) -> None:
@@ -264,12 +267,12 @@ def view_shift(view) -> str:
 
 
 def _monitor(run_dir: Path, target_shift: str, held_out, *, every: int, episodes: int, base_episodes: int,
-             patience: int, criterion: str, holdout: float, workers: int, gamma: float):
+             patience: int, criterion: str, holdout: float, seed: int, workers: int, gamma: float):
     from nsl.collectors import parse_shift
     from nsl.eval import EarlyStopConfig, EarlyStopMonitor, simulator_scorer
 
     cfg = EarlyStopConfig(every=every, episodes=episodes, base_episodes=base_episodes, patience=patience,
-                          criterion=criterion, held_out=holdout)
+                          criterion=criterion, held_out=holdout, seed=seed)
     score_target = score_base = None
     if episodes:
         score_target = simulator_scorer(parse_shift(target_shift), cfg.eval_config(workers=workers))
@@ -347,7 +350,7 @@ def _register(cat, name: str, folder: Path, parent, uses, shift: str):
                                parent=parent.id if parent else None, data=uses, shift=shift)
 
 
-def _register_evaluated(cat, name, run_dir: Path, parent, uses, shift: str) -> None:
+def _register_evaluated(cat, name, run_dir: Path, parent, uses, shift: str, seed: int) -> None:
     """Catalogue every evaluated checkpoint (so ckpt:NAME@STEP resolves) with its simulator evaluations.
 
     ckpt:NAME@best follows the simulator evaluations.
@@ -363,8 +366,8 @@ def _register_evaluated(cat, name, run_dir: Path, parent, uses, shift: str) -> N
             continue
         t = row.target
         cat.add_evaluation(entry.id, shift, episodes=t.episodes, successes=round(t.success_rate * t.episodes),
-                           seed=2000, extra={"source": "early stopping", "step": row.step})
+                           seed=seed, extra={"source": "early stopping", "step": row.step})
         if row.base is not None and row.base.episodes:
             b = row.base
             cat.add_evaluation(entry.id, "base", episodes=b.episodes, successes=round(b.success_rate * b.episodes),
-                               seed=2000, extra={"source": "early stopping", "step": row.step})
+                               seed=seed, extra={"source": "early stopping", "step": row.step})

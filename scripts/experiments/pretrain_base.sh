@@ -15,7 +15,7 @@ if [ "${1:-}" != "ship" ]; then
   # Offline QT-Opt from scratch, mixed 50/25/25, evaluated on 50 test-object episodes every 2,000 steps.
   # The shipped weights are this run's checkpoint at step 6,000 (success peaks there and then declines;
   # docs/experiments.md, "What limits the base"). Stop it with Ctrl-C after step 6,000 if you only want those; it resumes when re-run.
-  $NSL train --data grasp-base-oracle=0.5 --data grasp-base-noisy=0.25 --data grasp-base-random=0.25 --steps 20000 --eval-every 2000 --eval-episodes 50 --patience 100 --crop 2 --name base-flat --net action_dims=0,1,3
+  $NSL train --data grasp-base-oracle=0.5 --data grasp-base-noisy=0.25 --data grasp-base-random=0.25 --steps 20000 --eval-every 2000 --eval-scenes 2000 --eval-episodes 50 --patience 100 --crop 2 --name base-flat --net action_dims=0,1,3
   exit 0
 fi
 

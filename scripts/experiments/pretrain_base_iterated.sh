@@ -24,7 +24,7 @@ $NSL collect --shift base --episodes 667 --policy ckpt:base --epsilon 0.1 \
   --data grasp-base-learned --seed 4 --workers 2 --batch-size 8
 #   ... and a Monte-Carlo run on the scripted data (67% on the selection scenes).
 $NSL train --data grasp-base-oracle=0.5 --data grasp-base-noisy=0.25 --data grasp-base-random=0.25 $MC \
-  --eval-every 2000 --eval-episodes 50 --patience 100 --name s1-n8-cos6k
+  --eval-every 2000 --eval-scenes 2000 --eval-episodes 50 --patience 100 --name s1-n8-cos6k
 $NSL collect --shift base --episodes 667 --policy ckpt:s1-n8-cos6k@6000 --epsilon 0.1 \
   --data grasp-base-learned2 --seed 4 --workers 2 --batch-size 8
 

@@ -20,6 +20,9 @@
 # replaces each shift's data with 800 episodes the base collects with that chance of a random action per step
 # (protocol-eps0.3-SHIFT-by-base, collected first, seed 5) instead of the study's 10%; TARGET_EPISODES=1600 collects
 # that many instead of the protocol's 800 (protocol-eps0.1-n1600-SHIFT-by-base, the same seed as the study's 800).
+# INIT=ckpt:OTHER fine-tunes another parent on the same data (the base still collects it).
+# SHIFTS=base is a null fine-tune: the target half is the first 800 of those 8,000 base-task episodes the base
+# collected, and only the base task is scored.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 NSL=${NSL:-.venv/bin/nsl}
@@ -34,24 +37,33 @@ BASE="--data grasp-base-oracle=0.175 --data grasp-base-noisy=0.075 --data grasp-
       --data grasp-rounds-4:12000=0.05833"
 [ "${BASE_HALF:-}" = scripted ] && BASE="--data grasp-base-oracle=0.26923 --data grasp-base-noisy=0.11538
       --data grasp-base-random=0.11538"
-if [ "${BASE_HALF:-}" = own ]; then
+own_base_task() {  # 8,000 base-task episodes the base collects itself (resumes, or does nothing, when they exist)
   $NSL collect --shift base --episodes 8000 --policy ckpt:rounds-r4@6000 --epsilon 0.1 --data grasp-base-own --seed 20 \
-    --workers 2 --batch-size 8  # resumes, or does nothing, when it exists
+    --workers 2 --batch-size 8
+}
+if [ "${BASE_HALF:-}" = own ]; then
+  own_base_task
   BASE="--data grasp-base-oracle=0.175 --data grasp-base-noisy=0.075 --data grasp-base-random=0.075
         --data grasp-base-own=0.175"
 fi
 for s in ${SHIFTS:-harsh_lighting transparent_objects@0.8 checkerboard_backing@0.4 extend_gripper@2 offset_gripper@0.25}; do
   sl=$(echo "$s" | tr '+@_' '---')
   target="protocol-rounds-$sl-by-base:800"
-  if [ -n "${EPSILON:-}${TARGET_EPISODES:-}" ]; then
+  evals="$s,base"
+  if [ "$s" = base ]; then  # a null fine-tune: the target half is 800 base-task episodes the base collected
+    own_base_task
+    target="grasp-base-own:800"
+    evals=base
+  fi
+  if [ -n "${EPSILON:-}${TARGET_EPISODES:-}" ] && [ "$s" != base ]; then
     n=${TARGET_EPISODES:-800}
     target="protocol-eps${EPSILON:-0.1}-$sl-by-base"
     [ "$n" = 800 ] || target="protocol-eps${EPSILON:-0.1}-n$n-$sl-by-base"
     $NSL collect --shift "$s" --episodes "$n" --policy ckpt:rounds-r4@6000 --epsilon "${EPSILON:-0.1}" \
       --data "$target" --seed 5 --workers 2 --batch-size 8
   fi
-  $NSL train --init ckpt:rounds-r4@6000 --steps 1000 $BASE --data "$target=0.5" \
+  $NSL train --init "${INIT:-ckpt:rounds-r4@6000}" --steps 1000 $BASE --data "$target=0.5" \
     --checkpoint-every 500 "${OPTIONS[@]}" --name "$VARIANT-$sl"
-  [ -s "$OUT/$sl.json" ] || $NSL eval --checkpoint "ckpt:$VARIANT-$sl@latest" --shift "$s,base" --episodes "${EPISODES:-200}" \
+  [ -s "$OUT/$sl.json" ] || $NSL eval --checkpoint "ckpt:$VARIANT-$sl@latest" --shift "$evals" --episodes "${EPISODES:-200}" \
     --workers 2 --seed 3000 --json > "$OUT/$sl.json"
 done

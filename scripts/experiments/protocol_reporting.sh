@@ -8,7 +8,8 @@
 # protocol_mc_finetune.sh's default variant (mcft; mcft4 for harsh lighting@2), seeds 1 and 2 its variants mcs1
 # and mcs2, trained first (each also scored on 400 selection scenes, as protocol_mc_finetune.sh does). Records
 # go to $NSL_HOME/protocol-reporting/, and the table is printed last; about 16 minutes on 2 cores when seeds 1
-# and 2 are all to train.
+# and 2 are all to train. The base task after every fine-tune is also scored on 1,000 reporting scenes, as the base
+# itself is (one paired evaluation of all 16 checkpoints, 9 minutes).
 #
 #   NSL_HOME=<pretrain_base_rounds.sh's workspace> bash scripts/experiments/protocol_reporting.sh
 set -euo pipefail
@@ -34,14 +35,27 @@ for s in "${TASKS[@]}"; do
       --seed 2000 --json > "$OUT/$run.json"
   done
 done
+# The base task after every fine-tune, on 1,000 reporting scenes with the base itself (paired): base-after-1000.json
+refs=ckpt:rounds-r4@6000
+for s in "${TASKS[@]}"; do
+  sl=$(echo "$s" | tr '+@_' '---')
+  seed0="mcft-$sl"; has "mcft4-$sl" && seed0="mcft4-$sl"
+  refs+=",ckpt:$seed0@latest,ckpt:mcs1-$sl@latest,ckpt:mcs2-$sl@latest"
+done
+[ -s "$OUT/base-after-1000.json" ] || { $NSL eval --checkpoint "$refs" --shift base --episodes 1000 --workers 2 \
+  --seed 2000 --json > "$OUT/base-after-1000.tmp" && mv "$OUT/base-after-1000.tmp" "$OUT/base-after-1000.json"; }
 "${PY:-.venv/bin/python}" - "$OUT" <<'PY'
 import json, sys
 from pathlib import Path
 out = Path(sys.argv[1])
 base = json.loads((out / "base.json").read_text())["results"]
-print("| shift | base policy | fine-tuned, seeds 0 / 1 / 2 | mean gain | base task after (base: %.1f%%) |" % (100 * base["base"]["success_rate"]))
-print("|---|---|---|---|---|")
-gains, within = [], 0
+kept_1000 = {ref.split(":")[1].split("@")[0]: 100 * v["results"]["base"]["success_rate"]
+             for ref, v in json.loads((out / "base-after-1000.json").read_text())["policies"].items()}
+own = kept_1000.pop("rounds-r4")
+print("| shift | base policy | fine-tuned, seeds 0 / 1 / 2 | mean gain | base task after, 200 scenes (base: %.1f%%) | "
+      "base task after, 1,000 scenes (base: %.1f%%) |" % (100 * base["base"]["success_rate"], own))
+print("|---|---|---|---|---|---|")
+gains, within, within_1000 = [], 0, 0
 for shift, cell in base.items():
     if shift == "base":
         continue
@@ -53,8 +67,10 @@ for shift, cell in base.items():
     gain = sum(after) / 3 - 100 * cell["success_rate"]
     gains.append(gain)
     within += all(100 * base["base"]["success_rate"] - k <= 10 for k in kept)
+    kept2 = [kept_1000[r] for r in runs]
+    within_1000 += all(own - k <= 10 for k in kept2)
     print(f"| {shift} | {100 * cell['success_rate']:.1f}% | {' / '.join(f'{a:.1f}' for a in after)}% | {gain:+.1f} | "
-          f"{' / '.join(f'{k:.1f}' for k in kept)}% |")
+          f"{' / '.join(f'{k:.1f}' for k in kept)}% | {' / '.join(f'{k:.1f}' for k in kept2)}% |")
 print(f"\nmean gain {sum(gains) / len(gains):+.1f} points; base task within 10 points after every seed's fine-tune on "
-      f"{within} of {len(gains)} shifts")
+      f"{within} of {len(gains)} shifts (200 scenes), on {within_1000} of {len(gains)} (1,000 scenes)")
 PY

@@ -246,3 +246,24 @@ def test_continual_reports_a_stage_error_once_and_debug_shows_it(pipeline, monke
         "nsl: error: collection of cont-error-harsh-lighting refused"]
     with pytest.raises(ConfigError, match="collection of cont-error-harsh-lighting refused"):
         run_cli("--debug", *args)  # the stage's own exception, with its traceback
+
+
+def test_simulator_early_stopping_evaluates_on_its_own_scenes_and_catalogues_them(pipeline, capsys):
+    from nsl.eval import read_curve
+
+    assert run_cli("train", "--data", "grasp-base=0.5", "--data", "grasp-harsh=0.5", "--init", "ckpt:base-tiny",
+                   "--steps", "4", "--name", "es-tiny", "--eval-every", "2", "--eval-episodes", "3",
+                   "--base-episodes", "2", "--eval-scenes", "3000", "--patience", "3") == 0
+    run_dir = workspace.runs_dir() / "es-tiny"
+    rows = read_curve(run_dir / "curve.csv")
+    assert [r.step for r in rows] == [0, 2, 4]
+    assert all(r.target.episodes == 3 and r.base.episodes == 2 for r in rows)
+    summary = json.loads((run_dir / "early_stop.json").read_text())
+    assert summary["config"]["seed"] == 3000
+    assert json.loads((run_dir / "command.json").read_text())["options"]["eval_scenes"] == 3000
+    with Catalog() as cat:
+        for step in (2, 4):  # every evaluated step is catalogued with its evaluations, on the scenes of --eval-scenes
+            entry = cat.resolve_checkpoint(f"ckpt:es-tiny@{step}")
+            evals = {(e.shift, e.seed, e.episodes) for e in cat.evaluations(entry.id)}
+            assert evals == {("harsh_lighting", 3000, 3), ("base", 3000, 2)}
+    assert "best by eval:" in capsys.readouterr().out
