@@ -273,7 +273,19 @@ class EarlyStopMonitor:
             raise ConfigError(f"early-stop criterion {self.config.criterion!r} needs offline scores from held-out data")
         path = self.run_dir / CURVE_FILE
         self.rows: list[CurveRow] = read_curve(path) if path.is_file() else []
+        if self.rows:
+            self._check_same_evaluations()
         self.stopper = self._replay(self.rows)
+
+    def _check_same_evaluations(self) -> None:
+        """A resumed curve must go on with the same scenes and episode counts, or its steps are not comparable."""
+        old = load_early_stop(self.run_dir / EARLY_STOP_FILE).get("config", {})
+        new = self.config.to_dict()
+        changed = [k for k in ("seed", "episodes", "base_episodes") if k in old and old[k] != new[k]]
+        if changed:
+            was = ", ".join(f"{k} {old[k]}" for k in changed)
+            raise ConfigError(f"{self.run_dir.name}: its curve was evaluated with {was}; resume with the same "
+                              "settings (--eval-scenes, --eval-episodes, --base-episodes) or train under a new --name")
 
     def _replay(self, rows: list[CurveRow]) -> EarlyStopping:
         stopper = self.config.stopper()

@@ -201,6 +201,16 @@ def test_monitor_resumes_with_the_same_decision(tmp_path):
     assert read_curve(tmp_path / "part" / "curve.csv") == read_curve(tmp_path / "full" / "curve.csv")
 
 
+def test_a_resumed_curve_must_keep_its_scenes(tmp_path):
+    first = EarlyStopMonitor(EarlyStopConfig(every=1000, patience=3, seed=3000), tmp_path, score_target=_Scripted(TARGET))
+    first(0, None)
+    first(1000, None)
+    with pytest.raises(ConfigError, match=r"evaluated with seed 3000; resume with the same settings \(--eval-scenes"):
+        EarlyStopMonitor(EarlyStopConfig(every=1000, patience=3, seed=2000), tmp_path, score_target=_Scripted(TARGET))
+    same = EarlyStopMonitor(EarlyStopConfig(every=1000, patience=3, seed=3000), tmp_path, score_target=_Scripted(TARGET))
+    assert [r.step for r in same.rows] == [0, 1000]
+
+
 def test_monitor_with_an_offline_criterion_needs_no_simulator(tmp_path):
     cfg = EarlyStopConfig(episodes=0, base_episodes=0, criterion="td", patience=2)
     values = iter([0.3, 0.2, 0.25, 0.26])
