@@ -13,14 +13,12 @@ PY=${PY:-.venv/bin/python}
 HOME_DIR="${NSL_HOME:-$HOME/.nsl}"
 OUT="$HOME_DIR/protocol-iql"
 mkdir -p "$OUT"
-BASE=(--data grasp-base-oracle=0.175 --data grasp-base-noisy=0.075 --data grasp-base-random=0.075
-      --data grasp-rounds-1:4000=0.01945 --data grasp-rounds-2:8000=0.03889 --data grasp-rounds-3:12000=0.05833
-      --data grasp-rounds-4:12000=0.05833)
+source scripts/experiments/rounds_base_half.sh  # $BASE
 for tau in ${TAUS:-0.8}; do
   for s in ${SHIFTS:-harsh_lighting@2 offset_gripper@0.25}; do
     sl=$(echo "$s" | tr '+@_' '---')
     dir="$OUT/runs/$sl-tau$tau"
-    [ -f "$dir/config.json" ] || "$PY" scripts/experiments/probe_iql.py --init ckpt:rounds-r4@6000 "${BASE[@]}" \
+    [ -f "$dir/config.json" ] || "$PY" scripts/experiments/probe_iql.py --init ckpt:rounds-r4@6000 $BASE \
       --data "protocol-rounds-$sl-by-base:800=0.5" --tau "$tau" --out "$dir"
     rec="$OUT/$sl-tau$tau.txt"
     [ -s "$rec" ] || { for task in "$s" base; do

@@ -17,9 +17,7 @@ PY=${PY:-.venv/bin/python}
 HOME_DIR="${NSL_HOME:-$HOME/.nsl}"
 OUT="$HOME_DIR/protocol-early-stop"
 TASKS=(${SHIFTS:-harsh_lighting@2 transparent_objects@0.8 checkerboard_backing@0.4 extend_gripper@2 offset_gripper@0.25})
-BASE="--data grasp-base-oracle=0.175 --data grasp-base-noisy=0.075 --data grasp-base-random=0.075
-      --data grasp-rounds-1:4000=0.01945 --data grasp-rounds-2:8000=0.03889 --data grasp-rounds-3:12000=0.05833
-      --data grasp-rounds-4:12000=0.05833"
+source scripts/experiments/rounds_base_half.sh  # $BASE
 mkdir -p "$OUT"
 choose() {  # RUN RULE -> the chosen step (0 = the base)
   "$PY" - "$HOME_DIR/runs/$1/curve.csv" "$2" <<'PY'

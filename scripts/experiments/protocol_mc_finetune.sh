@@ -32,9 +32,7 @@ OPTIONS=("$@")
 [ ${#OPTIONS[@]} -gt 0 ] || OPTIONS=(--n-step 8 --crop 2)
 OUT="${NSL_HOME:-$HOME/.nsl}/protocol-$([ "$VARIANT" = mcft ] && echo mc || echo "$VARIANT")"
 mkdir -p "$OUT"
-BASE="--data grasp-base-oracle=0.175 --data grasp-base-noisy=0.075 --data grasp-base-random=0.075
-      --data grasp-rounds-1:4000=0.01945 --data grasp-rounds-2:8000=0.03889 --data grasp-rounds-3:12000=0.05833
-      --data grasp-rounds-4:12000=0.05833"
+source scripts/experiments/rounds_base_half.sh  # $BASE
 [ "${BASE_HALF:-}" = scripted ] && BASE="--data grasp-base-oracle=0.26923 --data grasp-base-noisy=0.11538
       --data grasp-base-random=0.11538"
 own_base_task() {  # 8,000 base-task episodes the base collects itself (resumes, or does nothing, when they exist)

@@ -14,9 +14,7 @@ NSL=${NSL:-.venv/bin/nsl}
 OUT="${NSL_HOME:-$HOME/.nsl}/protocol-scratch"
 mkdir -p "$OUT"
 MC="--steps 6000 --lr-decay 6000 --n-step 8 --crop 2 --net action_dims=0,1,3 --net hidden=256 --net head_layers=3"
-BASE="--data grasp-base-oracle=0.175 --data grasp-base-noisy=0.075 --data grasp-base-random=0.075
-      --data grasp-rounds-1:4000=0.01945 --data grasp-rounds-2:8000=0.03889 --data grasp-rounds-3:12000=0.05833
-      --data grasp-rounds-4:12000=0.05833"
+source scripts/experiments/rounds_base_half.sh  # $BASE
 SHIFTS=("$@")
 [ ${#SHIFTS[@]} -gt 0 ] || SHIFTS=(harsh_lighting@2 offset_gripper@0.25)
 for s in "${SHIFTS[@]}"; do

@@ -14,9 +14,7 @@ cd "$(dirname "$0")/../.."
 NSL=${NSL:-.venv/bin/nsl}
 OUT="${NSL_HOME:-$HOME/.nsl}/protocol-round2"
 mkdir -p "$OUT"
-BASE="--data grasp-base-oracle=0.175 --data grasp-base-noisy=0.075 --data grasp-base-random=0.075
-      --data grasp-rounds-1:4000=0.01945 --data grasp-rounds-2:8000=0.03889 --data grasp-rounds-3:12000=0.05833
-      --data grasp-rounds-4:12000=0.05833"
+source scripts/experiments/rounds_base_half.sh  # $BASE
 for s in ${SHIFTS:-harsh_lighting@2 offset_gripper@0.25}; do
   sl=$(echo "$s" | tr '+@_' '---')
   first="${VARIANT:-mcft4}-$sl"
