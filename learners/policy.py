@@ -1,10 +1,13 @@
-"""The CEM policy: a Q-network acting greedily (optionally epsilon-greedy) through CEM.
+"""The CEM policy: a Q-network acting greedily through CEM, optionally with exploration.
 
 It follows the collectors' policy interface::
 
     actions = policy(obs, rngs=rngs)      # obs["image"] (B, H, W, 3) uint8, obs["state"] (B, 2)
 
-and returns (B, 6) float32 environment actions.  Episode i's CEM noise and
+and returns (B, 6) float32 environment actions.  Two kinds of exploration can
+be added: ``action_noise`` perturbs every greedy action with Gaussian noise
+(local exploration, near what the policy would do), and ``epsilon`` replaces
+an action by a uniformly random one.  Episode i's CEM noise and
 exploration draws come from ``rngs[i]`` alone, and its network passes are
 computed for its state alone (batch of one), so its actions do not depend on
 which episodes share its batch, nor on the batch size or the thread count: a
@@ -37,17 +40,25 @@ from .networks import QNetwork
 
 
 class CEMPolicy:
-    """Greedy CEM over a Q-network; with probability ``epsilon`` per step a uniform random action instead."""
+    """Greedy CEM over a Q-network.
+
+    ``action_noise`` adds Gaussian noise of that standard deviation (in action units, clipped to [-1, 1]) to every
+    greedy action; then, with probability ``epsilon`` per step, a uniform random action replaces it.
+    """
 
     needs_privileged = False
 
     def __init__(self, net: QNetwork, cem: CemConfig | None = None, epsilon: float = 0.0, name: str = "cem",
-                 info: dict[str, Any] | None = None):
+                 info: dict[str, Any] | None = None, action_noise: float = 0.0):
         if not 0.0 <= epsilon <= 1.0:
             raise ConfigError(f"epsilon {epsilon!r} is out of range; use 0..1 (e.g. 0.1 for exploration)")
+        if not 0.0 <= action_noise <= 2.0:
+            raise ConfigError(f"action_noise {action_noise!r} is out of range; use a standard deviation in 0..2 "
+                              "action units (e.g. 0.3)")
         self.net = net.eval()
         self.cem = cem or CemConfig()
         self.epsilon = float(epsilon)
+        self.action_noise = float(action_noise)
         self.name = name
         self.info = dict(info or {})
 
@@ -89,6 +100,9 @@ class CEMPolicy:
                  privileged: list[dict] | None = None) -> np.ndarray:
         active, _ = self.greedy(obs, rngs)
         dims = len(self.net.cfg.action_dims)
+        if self.action_noise > 0:
+            for i, rng in enumerate(rngs):
+                active[i] = np.clip(active[i] + rng.normal(0.0, self.action_noise, dims), -1.0, 1.0)
         if self.epsilon > 0:
             for i, rng in enumerate(rngs):
                 explore, random_action = rng.random() < self.epsilon, rng.uniform(-1.0, 1.0, dims)
@@ -97,10 +111,13 @@ class CEMPolicy:
         return full_actions(active, self.net.cfg)
 
     def describe(self) -> dict[str, Any]:
-        return {"policy": "cem", "name": self.name, "cem": self.cem.to_dict(), "epsilon": self.epsilon, **self.info}
+        noise = {"action_noise": self.action_noise} if self.action_noise > 0 else {}  # absent at 0: old hashes hold
+        return {"policy": "cem", "name": self.name, "cem": self.cem.to_dict(), "epsilon": self.epsilon, **noise,
+                **self.info}
 
 
-def load_policy(checkpoint_dir: str | Path, epsilon: float = 0.0, **cem_overrides: Any) -> CEMPolicy:
+def load_policy(checkpoint_dir: str | Path, epsilon: float = 0.0, action_noise: float = 0.0,
+                **cem_overrides: Any) -> CEMPolicy:
     """A :class:`CEMPolicy` from a checkpoint folder; CEM settings default to the checkpoint's training ones."""
     ckpt = load_checkpoint(Path(checkpoint_dir))
     cem = TrainConfig.from_dict(ckpt.config["training"]).cem
@@ -111,4 +128,4 @@ def load_policy(checkpoint_dir: str | Path, epsilon: float = 0.0, **cem_override
     path = Path(checkpoint_dir)
     # The content id, not the path: a dataset's metadata (and so its version hash) holds this description.
     info = {"checkpoint_id": checkpoint_id(path), "step": ckpt.step}
-    return CEMPolicy(ckpt.net, cem, epsilon=epsilon, name=f"ckpt:{path.name}", info=info)
+    return CEMPolicy(ckpt.net, cem, epsilon=epsilon, name=f"ckpt:{path.name}", info=info, action_noise=action_noise)

@@ -23,8 +23,8 @@ def run_cli(*argv: str) -> int:
     return main(list(argv))
 
 
-def recorded_calls(script, tmp_path, **env: str) -> list[list[str]]:
-    """Run a shell recipe with a recording stand-in for `nsl` (``$NSL``): the argument lists it would run."""
+def recorded_calls(script, tmp_path, *args: str, **env: str) -> list[list[str]]:
+    """Run a shell recipe (with ``args``) and a recording stand-in for `nsl` (``$NSL``): the argument lists it would run."""
     import shlex
     import subprocess
 
@@ -33,6 +33,6 @@ def recorded_calls(script, tmp_path, **env: str) -> list[list[str]]:
     fake.write_text(f'#!/usr/bin/env bash\nprintf "%q " "$@" >> {log}\necho >> {log}\n')
     fake.chmod(0o755)
     env = {**os.environ, "NSL": str(fake), "NSL_HOME": str(tmp_path / "home"), **env}
-    subprocess.run(["bash", str(script)], env=env, check=True, capture_output=True)
+    subprocess.run(["bash", str(script), *args], env=env, check=True, capture_output=True)
     return [shlex.split(line) for line in log.read_text().splitlines()]
 

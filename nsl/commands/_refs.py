@@ -10,11 +10,12 @@ import functools
 from collections.abc import Callable
 
 
-def policy_factory(ref: str, env_config, epsilon: float = 0.0) -> Callable:
+def policy_factory(ref: str, env_config, epsilon: float = 0.0, action_noise: float = 0.0) -> Callable:
     """``random`` | ``oracle[:NOISE]`` | ``ckpt:NAME[@...]`` -> a picklable policy factory.
 
     A checkpoint becomes its CEM policy (``nsl.learners.load_policy``), built
-    once in each worker; ``epsilon`` adds epsilon-greedy exploration.
+    once in each worker; ``epsilon`` adds epsilon-greedy exploration and
+    ``action_noise`` Gaussian noise on every action.
     """
     if ref.startswith("ckpt:") or ref == "base":
         from nsl.catalog import Catalog
@@ -22,7 +23,7 @@ def policy_factory(ref: str, env_config, epsilon: float = 0.0) -> Callable:
 
         with Catalog() as cat:
             entry = resolve_init(cat, ref)
-        factory = functools.partial(load_policy, str(entry.path), epsilon=epsilon)
+        factory = functools.partial(load_policy, str(entry.path), epsilon=epsilon, action_noise=action_noise)
     else:
         from nsl.collectors import scripted_policy
 

@@ -35,6 +35,7 @@ class CollectConfig:
     image_size: int = 64  # camera resolution in pixels
     episodes_per_file: int = 100  # episodes per Parquet file (also the resume granularity)
     epsilon: float = 0.0  # checkpoint policies: probability of a uniformly random action per step (exploration)
+    action_noise: float = 0.0  # checkpoint policies: std of Gaussian noise on every action, in action units (exploration)
 
     def __post_init__(self) -> None:
         if self.episodes < 1:
@@ -45,6 +46,11 @@ class CollectConfig:
             raise ConfigError(f"--episodes-per-file {self.episodes_per_file} must be at least 1")
         if not 0.0 <= self.epsilon <= 1.0:
             raise ConfigError(f"--epsilon {self.epsilon} must be in [0, 1]")
+        if not 0.0 <= self.action_noise <= 2.0:
+            raise ConfigError(f"--action-noise {self.action_noise} must be a standard deviation in [0, 2] action units")
+        if self.action_noise > 0 and not (self.policy.startswith("ckpt:") or self.policy == "base"):
+            raise ConfigError(f"--action-noise applies to checkpoint policies (ckpt:NAME), not {self.policy!r}; "
+                              "for the oracle use oracle:NOISE")
         if self.seed < 0:
             raise ConfigError(f"--seed {self.seed} must be non-negative")
 
@@ -76,6 +82,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_seed(p, help="collection seed: episode i is a pure function of (seed, i)")
     p.add_argument("--epsilon", type=float, default=0.0,
                    help="with a ckpt: policy, chance of a random action per step (exploration)")
+    p.add_argument("--action-noise", type=float, default=0.0, metavar="STD",
+                   help="with a ckpt: policy, Gaussian noise of this std (action units; 1 unit moves the wrist 3 cm) "
+                        "added to every action: exploration near what the policy would do")
     add_env_batch_size(p, default=1)
     p.add_argument("--split", default="train", choices=["train", "test"], help="object split")
     p.add_argument("--image-size", type=int, default=64, help="camera resolution in pixels")
@@ -92,14 +101,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     collect(shift=args.shift, episodes=args.episodes, policy=args.policy, data=args.data, workers=args.workers,
             seed=args.seed, batch_size=args.batch_size, split=args.split, image_size=args.image_size,
-            episodes_per_file=args.episodes_per_file, epsilon=args.epsilon, restart=args.restart,
+            episodes_per_file=args.episodes_per_file, epsilon=args.epsilon, action_noise=args.action_noise,
+            restart=args.restart,
             stop_after_files=args.stop_after_files, cluster=args.cluster)
     return 0
 
 
 def collect(*, shift: str, episodes: int, policy: str, data: str, workers: int = 1, seed: int = 0,
             batch_size: int = 1, split: str = "train", image_size: int = 64, episodes_per_file: int = 100,
-            epsilon: float = 0.0, restart: bool = False, stop_after_files: int = 0, cluster: str | None = None,
+            epsilon: float = 0.0, action_noise: float = 0.0, restart: bool = False, stop_after_files: int = 0,
+            cluster: str | None = None,
             progress: bool = True):
     """Collect ``episodes`` episodes into dataset ``data`` (resuming or appending); returns its DatasetVersion.
 
@@ -113,9 +124,9 @@ def collect(*, shift: str, episodes: int, policy: str, data: str, workers: int =
 
     cfg = CollectConfig(shift=shift, episodes=episodes, policy=policy, data=data, workers=workers, seed=seed,
                         batch_size=batch_size, split=split, image_size=image_size,
-                        episodes_per_file=episodes_per_file, epsilon=epsilon)
+                        episodes_per_file=episodes_per_file, epsilon=epsilon, action_noise=action_noise)
     env_config = EnvConfig(shift=cfg.shift, split=cfg.split, image_size=cfg.image_size)
-    make_policy = policy_factory(cfg.policy, env_config, epsilon=cfg.epsilon)
+    make_policy = policy_factory(cfg.policy, env_config, epsilon=cfg.epsilon, action_noise=cfg.action_noise)
     spec = {"env": env_config.to_dict(), "policy": make_policy().describe(), "policy_ref": cfg.policy,
             "seed": cfg.seed}
     coll = api.Collection.begin(cfg.data, cfg.episodes, spec, cfg.image_size, cfg.episodes_per_file,
@@ -176,5 +187,7 @@ def _collect(coll, cfg: CollectConfig, env_config, make_policy, missing: list[in
 def _argv(cfg: CollectConfig) -> list[str]:
     out = []
     for k, v in asdict(cfg).items():
+        if k == "action_noise" and not v:
+            continue  # an option added later: commands without it are recorded as before
         out += [f"--{k.replace('_', '-')}", str(v)]
     return out

@@ -20,6 +20,9 @@
 # replaces each shift's data with 800 episodes the base collects with that chance of a random action per step
 # (protocol-eps0.3-SHIFT-by-base, collected first, seed 5) instead of the study's 10%; TARGET_EPISODES=1600 collects
 # that many instead of the protocol's 800 (protocol-eps0.1-n1600-SHIFT-by-base, the same seed as the study's 800).
+# NOISE=0.3 adds Gaussian noise of that std to every action of the collection (nsl collect --action-noise;
+# protocol-epsE-noise0.3-SHIFT-by-base, seed 5): local exploration near the base's own actions; EPSILON=0 NOISE=0.3
+# explores with that noise alone.
 # INIT=ckpt:OTHER fine-tunes another parent on the same data (the base still collects it).
 # SHIFTS=base is a null fine-tune: the target half is the first 800 of those 8,000 base-task episodes the base
 # collected, and only the base task is scored.
@@ -53,12 +56,12 @@ for s in ${SHIFTS:-harsh_lighting transparent_objects@0.8 checkerboard_backing@0
     target="grasp-base-own:800"
     evals=base
   fi
-  if [ -n "${EPSILON:-}${TARGET_EPISODES:-}" ] && [ "$s" != base ]; then
+  if [ -n "${EPSILON:-}${TARGET_EPISODES:-}${NOISE:-}" ] && [ "$s" != base ]; then
     n=${TARGET_EPISODES:-800}
-    target="protocol-eps${EPSILON:-0.1}-$sl-by-base"
-    [ "$n" = 800 ] || target="protocol-eps${EPSILON:-0.1}-n$n-$sl-by-base"
+    target="protocol-eps${EPSILON:-0.1}${NOISE:+-noise$NOISE}-$sl-by-base"
+    [ "$n" = 800 ] || target="protocol-eps${EPSILON:-0.1}${NOISE:+-noise$NOISE}-n$n-$sl-by-base"
     $NSL collect --shift "$s" --episodes "$n" --policy ckpt:rounds-r4@6000 --epsilon "${EPSILON:-0.1}" \
-      --data "$target" --seed 5 --workers 2 --batch-size 8
+      ${NOISE:+--action-noise $NOISE} --data "$target" --seed 5 --workers 2 --batch-size 8
   fi
   $NSL train --init "${INIT:-ckpt:rounds-r4@6000}" --steps 1000 $BASE --data "$target=0.5" \
     --checkpoint-every 500 "${OPTIONS[@]}" --name "$VARIANT-$sl"

@@ -11,26 +11,42 @@
 # and 2 are all to train. The base task after every fine-tune is also scored on 1,000 reporting scenes, as the base
 # itself is (one paired evaluation of all 16 checkpoints, 9 minutes).
 #
-#   NSL_HOME=<pretrain_base_rounds.sh's workspace> bash scripts/experiments/protocol_reporting.sh
+#   NSL_HOME=<pretrain_base_rounds.sh's workspace> bash scripts/experiments/protocol_reporting.sh [NAME OPTION...]
+#
+# With arguments, the same for another fine-tuning recipe: OPTIONS replace "--n-step 8 --crop 2", seed 0 is
+# protocol_mc_finetune.sh's variant NAME and seeds 1 and 2 its variants NAMEs1 and NAMEs2 (the options and
+# --seed N), and records go to $NSL_HOME/protocol-reporting-NAME/; e.g. `mcc01 --n-step 8 --crop 2 --conservative 0.1`.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 NSL=${NSL:-.venv/bin/nsl}
 HOME_DIR="${NSL_HOME:-$HOME/.nsl}"
-OUT="$HOME_DIR/protocol-reporting"
+NAME=${1:-}
+[ $# -gt 0 ] && shift
+OPTIONS=("$@")
+[ ${#OPTIONS[@]} -gt 0 ] || OPTIONS=(--n-step 8 --crop 2)
+OUT="$HOME_DIR/protocol-reporting${NAME:+-$NAME}"
 TASKS=(harsh_lighting@2 transparent_objects@0.8 checkerboard_backing@0.4 extend_gripper@2 offset_gripper@0.25)
 mkdir -p "$OUT"
 has() { [ -d "$HOME_DIR/checkpoints/$1" ]; }
+runs_of() {  # the three seeds' run names for shift slug $1: seed 0, seed 1, seed 2
+  if [ -n "$NAME" ]; then echo "$NAME-$1 ${NAME}s1-$1 ${NAME}s2-$1"; return; fi
+  local seed0="mcft-$1"; has "mcft4-$1" && seed0="mcft4-$1"
+  echo "$seed0 mcs1-$1 mcs2-$1"
+}
 for seed in 1 2; do  # finished runs and evaluations are kept, so this resumes
-  SHIFTS="${TASKS[*]}" EPISODES=400 NSL="$NSL" \
-    bash scripts/experiments/protocol_mc_finetune.sh "mcs$seed" --n-step 8 --crop 2 --seed "$seed"
+  variant="mcs$seed"; [ -n "$NAME" ] && variant="${NAME}s$seed"
+  SHIFTS="${TASKS[*]}" EPISODES=400 NSL="$NSL" bash scripts/experiments/protocol_mc_finetune.sh \
+    "$variant" "${OPTIONS[@]}" --seed "$seed"
 done
+seed0_args=(); seed0_episodes=200; [ -n "$NAME" ] && seed0_args=("$NAME" "${OPTIONS[@]}") && seed0_episodes=400
 [ -s "$OUT/base.json" ] || $NSL eval --checkpoint ckpt:rounds-r4@6000 --shift "base,$(IFS=,; echo "${TASKS[*]}")" \
   --episodes 200 --workers 2 --seed 2000 --json > "$OUT/base.json"
 for s in "${TASKS[@]}"; do
   sl=$(echo "$s" | tr '+@_' '---')
-  seed0="mcft-$sl"; has "mcft4-$sl" && seed0="mcft4-$sl"
-  has "$seed0" || NSL="$NSL" SHIFTS="$s" bash scripts/experiments/protocol_mc_finetune.sh
-  for run in "$seed0" "mcs1-$sl" "mcs2-$sl"; do
+  read -r seed0 _ _ <<< "$(runs_of "$sl")"
+  has "$seed0" || NSL="$NSL" SHIFTS="$s" EPISODES=$seed0_episodes bash scripts/experiments/protocol_mc_finetune.sh \
+    "${seed0_args[@]}"
+  for run in $(runs_of "$sl"); do
     [ -s "$OUT/$run.json" ] || $NSL eval --checkpoint "ckpt:$run@latest" --shift "$s,base" --episodes 200 --workers 2 \
       --seed 2000 --json > "$OUT/$run.json"
   done
@@ -38,16 +54,14 @@ done
 # The base task after every fine-tune, on 1,000 reporting scenes with the base itself (paired): base-after-1000.json
 refs=ckpt:rounds-r4@6000
 for s in "${TASKS[@]}"; do
-  sl=$(echo "$s" | tr '+@_' '---')
-  seed0="mcft-$sl"; has "mcft4-$sl" && seed0="mcft4-$sl"
-  refs+=",ckpt:$seed0@latest,ckpt:mcs1-$sl@latest,ckpt:mcs2-$sl@latest"
+  for run in $(runs_of "$(echo "$s" | tr '+@_' '---')"); do refs+=",ckpt:$run@latest"; done
 done
 [ -s "$OUT/base-after-1000.json" ] || { $NSL eval --checkpoint "$refs" --shift base --episodes 1000 --workers 2 \
   --seed 2000 --json > "$OUT/base-after-1000.tmp" && mv "$OUT/base-after-1000.tmp" "$OUT/base-after-1000.json"; }
-"${PY:-.venv/bin/python}" - "$OUT" <<'PY'
+"${PY:-.venv/bin/python}" - "$OUT" "$NAME" <<'PY'
 import json, sys
 from pathlib import Path
-out = Path(sys.argv[1])
+out, name = Path(sys.argv[1]), sys.argv[2]
 base = json.loads((out / "base.json").read_text())["results"]
 kept_1000 = {ref.split(":")[1].split("@")[0]: 100 * v["results"]["base"]["success_rate"]
              for ref, v in json.loads((out / "base-after-1000.json").read_text())["policies"].items()}
@@ -60,7 +74,10 @@ for shift, cell in base.items():
     if shift == "base":
         continue
     sl = shift.replace("_", "-").replace("@", "-")
-    runs = [f for f in (f"mcft4-{sl}", f"mcft-{sl}") if (out / f"{f}.json").exists()][:1] + [f"mcs1-{sl}", f"mcs2-{sl}"]
+    if name:
+        runs = [f"{name}-{sl}", f"{name}s1-{sl}", f"{name}s2-{sl}"]
+    else:
+        runs = [f for f in (f"mcft4-{sl}", f"mcft-{sl}") if (out / f"{f}.json").exists()][:1] + [f"mcs1-{sl}", f"mcs2-{sl}"]
     res = [json.loads((out / f"{r}.json").read_text())["results"] for r in runs]
     after = [100 * r[shift]["success_rate"] for r in res]
     kept = [100 * r["base"]["success_rate"] for r in res]

@@ -65,6 +65,20 @@ def test_checkpoint_policy_collects_and_evaluations_are_stored(pipeline, capsys)
     assert {"base", "harsh_lighting"} <= shifts
 
 
+def test_action_noise_is_recorded_with_the_data_and_refused_for_scripted_policies(pipeline):
+    from nsl.datasets import api
+
+    assert run_cli("collect", "--shift", "offset_gripper@0.25", "--episodes", "2", "--policy", "ckpt:base-tiny",
+                   "--data", "offset-noisy", "--batch-size", "2", "--action-noise", "0.3") == 0
+    v = api.open_version("offset-noisy")
+    spec = v.provenance["collections"][-1]["spec"]
+    assert spec["policy"]["action_noise"] == 0.3 and spec["policy"]["epsilon"] == 0.0
+    assert "--action-noise 0.3" in v.manifest["created"]["command"]
+    with pytest.raises(ConfigError, match="--action-noise applies to checkpoint policies"):
+        run_cli("--debug", "collect", "--shift", "base", "--episodes", "2", "--policy", "oracle:0.5",
+                "--data", "oracle-noisy", "--action-noise", "0.3")
+
+
 def test_continual_rejects_bad_sequences_before_any_work(pipeline):
     before = sorted(p.name for p in (pipeline / "datasets").iterdir())
     with pytest.raises(UnknownReferenceError, match="unknown shift 'harsh'"):

@@ -99,6 +99,25 @@ def test_epsilon_greedy_explores(parent_checkpoint):
         load_policy(parent_checkpoint, epsilon=1.5)
 
 
+def test_action_noise_explores_near_the_greedy_action_and_is_recorded_only_when_used(parent_checkpoint):
+    greedy = load_policy(parent_checkpoint)
+    noisy = load_policy(parent_checkpoint, action_noise=0.2)
+    obs = _obs(64)
+    a = greedy(obs, rngs=[np.random.default_rng(i) for i in range(64)])
+    b = noisy(obs, rngs=[np.random.default_rng(i) for i in range(64)])
+    again = noisy(obs, rngs=[np.random.default_rng(i) for i in range(64)])
+    np.testing.assert_array_equal(b, again)  # the noise comes from each episode's generator
+    searched = [0, 1, 3, 5]  # the parent's active dims; dz and close stay fixed
+    diff = (b - a)[:, searched]
+    assert np.all(diff != 0) or np.any(np.abs(b[:, searched]) == 1.0)  # every action moved, unless clipped
+    assert 0.1 < diff[np.abs(b[:, searched]) < 1.0].std() < 0.3  # about the asked std, not a uniform action
+    assert np.all(b[:, 2] == a[:, 2]) and np.all(b[:, 4] == -1.0)
+    assert noisy.describe()["action_noise"] == 0.2
+    assert "action_noise" not in greedy.describe()  # older datasets' hashed policy descriptions stay the same
+    with pytest.raises(ConfigError, match="action_noise"):
+        load_policy(parent_checkpoint, action_noise=-0.1)
+
+
 def test_images_of_the_wrong_size_are_refused(parent_checkpoint):
     policy = load_policy(parent_checkpoint)
     bad = {"image": np.zeros((1, 32, 32, 3), np.uint8), "state": np.zeros((1, 6), np.float32)}
