@@ -58,10 +58,13 @@ for s in "${TASKS[@]}"; do
 done
 [ -s "$OUT/base-after-1000.json" ] || { $NSL eval --checkpoint "$refs" --shift base --episodes 1000 --workers 2 \
   --seed 2000 --json > "$OUT/base-after-1000.tmp" && mv "$OUT/base-after-1000.tmp" "$OUT/base-after-1000.json"; }
-"${PY:-.venv/bin/python}" - "$OUT" "$NAME" <<'PY'
-import json, sys
+runs=""  # one line per shift: its slug, then its three seeds' run names
+for s in "${TASKS[@]}"; do sl=$(echo "$s" | tr '+@_' '---'); runs+="$sl $(runs_of "$sl")"$'\n'; done
+RUNS="$runs" "${PY:-.venv/bin/python}" - "$OUT" <<'PY'
+import json, os, sys
 from pathlib import Path
-out, name = Path(sys.argv[1]), sys.argv[2]
+out = Path(sys.argv[1])
+runs_of = {line.split()[0]: line.split()[1:] for line in os.environ["RUNS"].splitlines() if line}
 base = json.loads((out / "base.json").read_text())["results"]
 kept_1000 = {ref.split(":")[1].split("@")[0]: 100 * v["results"]["base"]["success_rate"]
              for ref, v in json.loads((out / "base-after-1000.json").read_text())["policies"].items()}
@@ -74,10 +77,7 @@ for shift, cell in base.items():
     if shift == "base":
         continue
     sl = shift.replace("_", "-").replace("@", "-")
-    if name:
-        runs = [f"{name}-{sl}", f"{name}s1-{sl}", f"{name}s2-{sl}"]
-    else:
-        runs = [f for f in (f"mcft4-{sl}", f"mcft-{sl}") if (out / f"{f}.json").exists()][:1] + [f"mcs1-{sl}", f"mcs2-{sl}"]
+    runs = runs_of[sl]
     res = [json.loads((out / f"{r}.json").read_text())["results"] for r in runs]
     after = [100 * r[shift]["success_rate"] for r in res]
     kept = [100 * r["base"]["success_rate"] for r in res]
