@@ -3,6 +3,7 @@
 Public surface (other folders import these from ``nsl.learners`` only)::
 
     NetConfig, CemConfig, TrainConfig, METHODS         # settings
+    FINE_TUNE_STEPS, FINE_TUNE_CONSERVATIVE            # the fine-tuning recipe's defaults (with the 25% rate)
     QNetwork                                           # Q(image, state, action) -> logit
     cem_maximize, noise_from_generator, noise_from_rngs
     Learner, update, bellman_target                    # one QT-Opt step
@@ -18,7 +19,7 @@ The learner knows no simulator: it never imports ``nsl.collectors`` or ``nsl.eva
 from .cem import cem_maximize, full_actions, noise_from_generator, noise_from_rngs
 from .checkpoint import (CHECKPOINT_FORMAT, CHECKPOINT_VERSION, CONFIG_FILE, MODEL_FILE, TRAINER_FILE, Checkpoint,
                          checkpoint_config, checkpoint_id, load_checkpoint, read_config, save_checkpoint)
-from .config import METHODS, CemConfig, NetConfig, TrainConfig
+from .config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_STEPS, METHODS, CemConfig, NetConfig, TrainConfig
 from .networks import QNetwork
 from .policy import CEMPolicy, load_policy
 from .qtopt import Learner, bellman_target, update
@@ -29,7 +30,7 @@ __all__ = [
     "cem_maximize", "full_actions", "noise_from_generator", "noise_from_rngs",
     "CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "CONFIG_FILE", "MODEL_FILE", "TRAINER_FILE", "Checkpoint",
     "checkpoint_config", "checkpoint_id", "load_checkpoint", "read_config", "save_checkpoint",
-    "METHODS", "CemConfig", "NetConfig", "TrainConfig", "QNetwork", "CEMPolicy", "load_policy",
+    "FINE_TUNE_CONSERVATIVE", "FINE_TUNE_STEPS", "METHODS", "CemConfig", "NetConfig", "TrainConfig", "QNetwork", "CEMPolicy", "load_policy",
     "Learner", "bellman_target", "update", "ArraySampler", "Sampler",
     "FINAL_DIR", "TrainResult", "inherited_settings", "train",
 ]

@@ -24,6 +24,10 @@ POOLS = ("flatten", "max", "spatial")
 NORMS = ("none", "group")
 METHODS = ("scratch", "ft", "new_head", "pnn", "ft_pnn")
 FINE_TUNE_LR_FACTOR = 0.25  # fine-tuning learning rate = 25% of the parent's (the study's recipe)
+# The fine-tuning recipe's other two settings, chosen on selection scenes (docs/experiments.md, "A conservative
+# term in the Monte-Carlo fine-tune"): the conservative term's weight and the number of gradient steps.
+FINE_TUNE_CONSERVATIVE = 0.1
+FINE_TUNE_STEPS = 2000
 
 
 def _tuple(v: Any) -> tuple:
@@ -143,7 +147,8 @@ class TrainConfig:
     polyak: float = 0.995  # target network 1: theta_bar <- polyak * theta_bar + (1 - polyak) * theta, every step
     lag_period: int = 1000  # target network 2: a copy of the online network, refreshed every lag_period steps
     cem: CemConfig = field(default_factory=CemConfig)  # action maximisation for the Bellman target
-    conservative: float = 0.0  # weight of scoring uniform random actions as failures (keeps unseen actions down); 0 disables
+    conservative: float | None = None  # weight of scoring uniform random actions as failures (keeps unseen actions
+    # down); 0 disables; None: 0 from scratch, FINE_TUNE_CONSERVATIVE when fine-tuning from a parent
     conservative_samples: int = 16  # uniform random actions per state for that term
     shrink_perturb: tuple[float, float] | None = None  # (alpha, sigma): fine-tuning starts from alpha * parent +
     # sigma * a fresh initialisation (Ash and Adams 2020); None keeps the parent's weights
@@ -174,7 +179,7 @@ class TrainConfig:
                               f"(got {self.lag_period}, {self.log_every}, {self.checkpoint_every}, {self.eval_every})")
         if self.augment_crop < 0 or self.augment_colour < 0 or self.grad_clip < 0 or self.weight_decay < 0:
             raise ConfigError("augment_crop, augment_colour, grad_clip and weight_decay must be non-negative")
-        if self.conservative < 0 or self.conservative_samples < 1:
+        if (self.conservative is not None and self.conservative < 0) or self.conservative_samples < 1:
             raise ConfigError(f"conservative {self.conservative} must be >= 0 and conservative_samples "
                               f"{self.conservative_samples} >= 1")
         if self.shrink_perturb is not None:

@@ -112,7 +112,8 @@ def update(learner: Learner, batch: dict[str, torch.Tensor], cfg: TrainConfig, s
         target, next_value = bellman_target(learner.polyak, learner.lagged, next_image, batch[keys.NEXT_OBS_STATE],
                                             reward, done, batch.get(keys.DISCOUNT, cfg.gamma), cfg.cem, noise)
 
-    if cfg.conservative > 0:
+    alpha = cfg.conservative or 0.0  # None (unresolved, outside train()) is plain QT-Opt
+    if alpha > 0:
         # The data's action first, then uniform random candidates; one trunk pass for all of them.
         rand = torch.rand(len(reward), cfg.conservative_samples, action.shape[1], generator=gen) * 2.0 - 1.0
         all_logits = net.score(net.encode(image, batch[keys.OBS_STATE]), torch.cat([action.unsqueeze(1), rand], 1))
@@ -123,7 +124,7 @@ def update(learner: Learner, batch: dict[str, torch.Tensor], cfg: TrainConfig, s
         logits = net(image, batch[keys.OBS_STATE], action)
         conservative = logits.new_zeros(())
     td_loss = F.binary_cross_entropy_with_logits(logits, target)
-    loss = td_loss + cfg.conservative * conservative
+    loss = td_loss + alpha * conservative
     learner.optimizer.zero_grad(set_to_none=True)
     loss.backward()
     params = net.trainable_parameters()

@@ -49,7 +49,7 @@ from nsl.workspace import atomic_write_bytes
 
 from .checkpoint import (Checkpoint, checkpoint_config, checkpoint_id, load_checkpoint, load_trainer_state,
                          read_config, save_checkpoint, write_json, TRAINER_FILE)
-from .config import FINE_TUNE_LR_FACTOR, METHODS, NetConfig, TrainConfig
+from .config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_LR_FACTOR, METHODS, NetConfig, TrainConfig
 from .networks import QNetwork, grow_column, reinit_head, shrink_perturb
 from .policy import CEMPolicy
 from .qtopt import Learner, batch_to_torch, update
@@ -99,6 +99,13 @@ def resolve_lr(config: TrainConfig, method: str, parent: Checkpoint | None) -> f
     return parent.lr if method == "scratch" else parent.lr * FINE_TUNE_LR_FACTOR
 
 
+def resolve_conservative(config: TrainConfig, parent: Checkpoint | None) -> float:
+    """The explicit ``config.conservative``, else 0 from scratch and FINE_TUNE_CONSERVATIVE with a parent."""
+    if config.conservative is not None:
+        return config.conservative
+    return 0.0 if parent is None else FINE_TUNE_CONSERVATIVE
+
+
 def initial_network(method: str, parent: Checkpoint | None, net: NetConfig | None, seed: int) -> QNetwork:
     """The network a run starts from (random parts drawn from ``seed``)."""
     torch.manual_seed(seed)
@@ -140,7 +147,7 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
                           "the config's values")
     parent = load_checkpoint(Path(init_checkpoint)) if init_checkpoint is not None else None
     lr = resolve_lr(config, method, parent)
-    resolved = config.replace(lr=lr)
+    resolved = config.replace(lr=lr, conservative=resolve_conservative(config, parent))
     model = initial_network(method, parent, net or (None if parent else NetConfig()), config.seed)
     if config.shrink_perturb is not None:
         if parent is None or method == "scratch":

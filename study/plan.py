@@ -70,7 +70,7 @@ class Eval:
 @dataclass(frozen=True)
 class Finetune:
     tiers: tuple[int, ...] = (25, 50, 100, 200, 400, 800)  # target episodes, nested first-K views
-    steps: int = 1000  # gradient steps per fine-tuning run
+    steps: int = 2000  # gradient steps per fine-tuning run (the fine-tuning recipe's, nsl.learners.FINE_TUNE_STEPS)
     seeds: tuple[int, ...] = (0,)  # training seeds; a cell pools its seeds' episodes
     baselines: tuple[str, ...] = ("scratch", "new_head")  # methods trained at the top tier for comparison
 
@@ -80,7 +80,7 @@ class Continual:
     sequence: tuple[str, ...] = ("harsh_lighting", "transparent_objects", "checkerboard_backing", "extend_gripper",
                                  "offset_gripper")
     episodes: int = 800  # episodes each stage's policy collects in its shift
-    steps: int = 1000  # gradient steps per stage
+    steps: int = 2000  # gradient steps per stage (the fine-tuning recipe's)
     seed: int = 0  # training seed
 
 

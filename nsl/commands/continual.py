@@ -25,7 +25,7 @@ class ContinualConfig:
     init: str  # checkpoint the sequence starts from
     base_data: str  # base dataset mixed 50/50 into every stage
     episodes: int = 800  # target attempts collected per stage
-    steps: int = 4000  # gradient steps per stage
+    steps: int = 2000  # gradient steps per stage (the fine-tuning recipe's, nsl.learners.FINE_TUNE_STEPS)
     eval_episodes: int = 100  # evaluation episodes per task and stage
     epsilon: float = 0.1  # exploration during collection
     workers: int = 1
@@ -45,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="base dataset mixed 50/50 into every stage")
     p.add_argument("--name", default="continual", help="run name (folder under $NSL_HOME/runs, dataset prefix)")
     p.add_argument("--episodes", type=int, default=800, help="attempts collected per stage")
-    p.add_argument("--steps", type=int, default=4000, help="gradient steps per stage")
+    p.add_argument("--steps", type=int, default=2000, help="gradient steps per stage (the fine-tuning recipe's)")
     p.add_argument("--eval-episodes", type=int, default=100, help="evaluation episodes per task and stage")
     p.add_argument("--epsilon", type=float, default=0.1, help="exploration during collection")
     add_workers(p, help="simulator processes for collection and evaluation")

@@ -27,7 +27,7 @@ class EfficiencyConfig:
     sizes: tuple[int, ...]  # tier sizes in target episodes (attempts)
     init: str  # checkpoint every fine-tune starts from
     base_data: str  # base dataset mixed 50/50 into every fine-tune
-    steps: int = 4000  # gradient steps per fine-tune
+    steps: int = 2000  # gradient steps per fine-tune (the fine-tuning recipe's, nsl.learners.FINE_TUNE_STEPS)
     eval_episodes: int = 100  # evaluation episodes per cell (scene seeds 1000, i: the same for every cell)
     workers: int = 1
     seed: int = 0
@@ -38,7 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = add_parser(sub, "efficiency", help="fine-tune on each dataset tier and evaluate: success vs target attempts",
                    description=__doc__.split("\n\n", 1)[1].strip(),
                    epilog="example: nsl efficiency --data grasp-harsh --sizes 25,50,100,200,400,800 "
-                          "--init ckpt:base --base-data grasp-base --steps 4000 --name efficiency-harsh")
+                          "--init ckpt:base --base-data grasp-base --name efficiency-harsh")
     p.add_argument("--data", action="append", required=True, metavar="REF",
                    help="target dataset NAME[@vN] whose first-K tiers are used; repeat for one row per shift")
     p.add_argument("--sizes", default="25,50,100,200,400,800",
@@ -47,7 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--base-data", default="grasp-base", metavar="REF",
                    help="base dataset mixed 50/50 into each fine-tune")
     p.add_argument("--name", default="efficiency", help="run name (folder under $NSL_HOME/runs, checkpoint prefix)")
-    p.add_argument("--steps", type=int, default=4000, help="gradient steps per fine-tune")
+    p.add_argument("--steps", type=int, default=2000, help="gradient steps per fine-tune (the fine-tuning recipe's)")
     p.add_argument("--eval-episodes", type=int, default=100, help="evaluation episodes per cell")
     add_workers(p, help="simulator processes for evaluation")
     add_seed(p, help="training seed of every fine-tune")
@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def efficiency(*, data: list[str], sizes: tuple[int, ...], init: str = "ckpt:base", base_data: str = "grasp-base",
-               name: str = "efficiency", steps: int = 4000, eval_episodes: int = 100, workers: int = 1,
+               name: str = "efficiency", steps: int = 2000, eval_episodes: int = 100, workers: int = 1,
                seed: int = 0, scratch: bool = False):
     """Run (or resume) a sample-efficiency sweep; returns the TierResults written to RUN/tiers.json."""
     from nsl import workspace

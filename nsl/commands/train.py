@@ -22,9 +22,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = add_parser(
         sub, "train", help="pre-train (no --init) or fine-tune (--init CKPT) a Q-function offline",
         description="Offline QT-Opt on one or more dataset versions mixed by weight. Without --init this is "
-                    "pre-training; with --init it fine-tunes from a catalogued checkpoint at 25% of its learning "
-                    "rate, keeping its n-step returns and crop (the study's recipe: mix the target data 50/50 with "
-                    "the base data). Running the same "
+                    "pre-training; with --init it fine-tunes from a catalogued checkpoint with the fine-tuning "
+                    "recipe: 2,000 steps at 25% of its learning rate, keeping its n-step returns and crop, with the "
+                    "conservative term at 0.1 (mix the target data 50/50 with the base data, as the study did; "
+                    "docs/learners.md). Running the same "
                     "command again resumes from the last checkpoint. The final checkpoint (and, with early "
                     "stopping, every evaluated one) is registered in the catalog under --name.")
     p.add_argument("--data", action="append", required=True, metavar="REF[=WEIGHT]",
@@ -35,7 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=METHOD_HELP + " (default: ft with --init, else scratch)")
     p.add_argument("--lr", type=float, default=None,
                    help="learning rate (default: 3e-4; fine-tuning: 25%% of the parent's)")
-    p.add_argument("--steps", type=int, required=True, help="gradient steps")
+    p.add_argument("--steps", type=int, default=None,
+                   help="gradient steps (required for pre-training; fine-tuning: 2000)")
     p.add_argument("--lr-decay", type=int, default=0, metavar="STEPS",
                    help="cosine-decay the learning rate to 5%% of --lr over STEPS steps, then keep it there; the "
                         "late checkpoints then move less from one to the next (0 = constant)")
@@ -47,9 +49,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--checkpoint-every", type=int, default=2000,
                    help="steps between checkpoints (a killed run resumes from the last one)")
     p.add_argument("--no-augment", action="store_true", help="switch image augmentation off")
-    p.add_argument("--conservative", type=float, default=0.0, metavar="ALPHA",
+    p.add_argument("--conservative", type=float, default=None, metavar="ALPHA",
                    help="weight of scoring random actions as failures, which keeps offline Q values of unseen "
-                        "actions down (0 = plain QT-Opt)")
+                        "actions down (0 = plain QT-Opt; default: 0 for pre-training, 0.1 for fine-tuning)")
     p.add_argument("--shrink-perturb", default=None, metavar="ALPHA,SIGMA",
                    help="with --init: start from ALPHA * the parent's weights + SIGMA * a fresh initialisation "
                         "(shrink and perturb, Ash and Adams 2020), e.g. 0.8,0.01; recorded in the run's config")
@@ -160,25 +162,33 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def train(*, data: list[str], steps: int, name: str, init: str | None = None, method: str | None = None,
+def train(*, data: list[str], steps: int | None, name: str, init: str | None = None, method: str | None = None,
           lr: float | None = None, lr_decay: int = 0, weight_decay: float = 0.0, batch_size: int = 64, seed: int = 0,
-          checkpoint_every: int = 2000, no_augment: bool = False, conservative: float = 0.0, n_step: int | None = None,
+          checkpoint_every: int = 2000, no_augment: bool = False, conservative: float | None = None, n_step: int | None = None,
           shrink_perturb: str | None = None, crop: int | None = None, net: list[str] = (), eval_every: int = 0,
           eval_episodes: int = 50, base_episodes: int = 0, target_shift: str | None = None, patience: int = 5,
           criterion: str = "eval", holdout: float = 0.1, eval_scenes: int = 3000, workers: int = 1):
     """Train (or resume) run ``name`` and catalogue its checkpoints; returns the final CheckpointEntry.
 
     The keyword arguments are those of ``nsl train`` (``data`` holds the
-    ``REF[=WEIGHT]`` strings of its repeated ``--data``).
+    ``REF[=WEIGHT]`` strings of its repeated ``--data``).  ``steps`` and
+    ``conservative`` None are the fine-tuning recipe's with ``init``
+    (``nsl.learners.FINE_TUNE_STEPS``, ``FINE_TUNE_CONSERVATIVE``).
     """
     from nsl import code_version, workspace
     from nsl.catalog import Catalog
     from nsl.datasets import api
     from nsl.errors import ConfigError
-    from nsl.learners import TrainConfig, inherited_settings
+    from nsl.learners import TrainConfig, config as learner_config, inherited_settings
     from nsl.learners import train as train_learner
     from nsl.commands._refs import dataset_uses, resolve_init
 
+    if steps is None:
+        if not init:
+            raise ConfigError("--steps is required for pre-training; give the number of gradient steps, e.g. "
+                              "--steps 20000 (fine-tuning with --init defaults to the recipe's "
+                              f"{learner_config.FINE_TUNE_STEPS})")
+        steps = learner_config.FINE_TUNE_STEPS
     if steps < 1:
         raise ConfigError(f"--steps {steps} must be at least 1")
     if criterion not in CRITERIA:
