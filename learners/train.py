@@ -271,6 +271,8 @@ def _check_same_run(out: Path, run: dict) -> None:
             a = {k: v for k, v in a.items() if k != "path"}  # older runs also recorded the parent's folder
         if section == "training":
             a = TrainConfig.from_dict(a).to_dict() if a else {}  # settings added since then take their defaults
+            if a and a.get("conservative") is None:
+                a["conservative"] = 0.0  # recorded before the term existed: the run had none
             a = {k: v for k, v in a.items() if k not in RESUMABLE_CHANGES}
             b = {k: v for k, v in b.items() if k not in RESUMABLE_CHANGES}
         if a != b:

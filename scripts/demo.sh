@@ -24,9 +24,10 @@ echo "== 4. Pre-train a Q-function offline on the base data (short, to show the 
 $NSL train --data grasp-base-oracle --steps 1000 --n-step 8 --name demo-base
 
 echo "== 5. Fine-tune the shipped base policy (ckpt:base) on its harsh-lighting data, 50/50 with base data"
+echo "      (the fine-tuning recipe: 2,000 steps at 25% of the base's rate, conservative term 0.1)"
 $NSL train --data grasp-base-oracle=0.27 --data grasp-base-noisy=0.115 --data grasp-base-random=0.115 \
-  --data demo-harsh=0.5 --init ckpt:base --steps 1000 --name demo-harsh \
-  --eval-every 250 --eval-episodes 20 --base-episodes 20 --patience 2 --workers $W
+  --data demo-harsh=0.5 --init ckpt:base --name demo-harsh \
+  --eval-every 500 --eval-episodes 20 --base-episodes 20 --patience 2 --workers $W
 
 echo "== 6. Evaluate the base and the fine-tuned checkpoints on the same scenes (paired)"
 $NSL eval --checkpoint ckpt:base,ckpt:demo-harsh@best --shift base,harsh_lighting@2 --episodes 100 --workers $W

@@ -31,7 +31,7 @@ for variant in "${@:-own-small scripted}"; do
     else
       echo "unknown variant $v: use own-small or scripted" >&2; exit 2
     fi
-    $NSL train "${data[@]}" --init ckpt:base --steps 900 --name "data-$v" \
+    $NSL train "${data[@]}" --init ckpt:base --steps 900 --conservative 0 --name "data-$v" \
       --eval-every 300 --eval-scenes 2000 --eval-episodes 20 --base-episodes 20 --patience 100 --workers 1
     $NSL eval --checkpoint "ckpt:base,ckpt:data-$v@300,ckpt:data-$v@600,ckpt:data-$v@900" --shift "base,$shift" \
       --episodes 100 --workers 1 --seed 2000 --markdown

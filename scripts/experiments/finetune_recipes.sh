@@ -28,7 +28,7 @@ for s in $SHIFTS; do  # the fine-tunes (a finished run is resumed at its last st
   for recipe in "${RECIPES[@]}"; do
     set -- $recipe
     name="$1-$sl"; shift
-    $NSL train --init ckpt:base --steps 1000 $BASE --data "full-$sl-by-base=0.5" --name "$name" "$@" \
+    $NSL train --init ckpt:base --steps 1000 --conservative 0 $BASE --data "full-$sl-by-base=0.5" --name "$name" "$@" \
       2>> "$OUT/progress.log"
   done
 done

@@ -22,7 +22,7 @@ for ref in "$@"; do
   # ckpt:NAME@STEP -> plast-NAME-STEP (a valid checkpoint name)
   name="plast-$(echo "${ref#ckpt:}" | tr '@' '-')"
   # --eval-every registers steps 300 / 600 / 900 in the catalog; --patience 100 never stops early.
-  $NSL train --data demo-base=0.5 --data demo-harsh=0.5 --init "$ref" --steps 900 --name "$name" \
+  $NSL train --data demo-base=0.5 --data demo-harsh=0.5 --init "$ref" --steps 900 --conservative 0 --name "$name" \
     --eval-every 300 --eval-scenes 2000 --eval-episodes 10 --base-episodes 10 --patience 100 --workers 2
   $NSL eval --checkpoint "$ref,ckpt:$name@300,ckpt:$name@600,ckpt:$name@900" \
     --shift harsh_lighting,base --episodes 100 --workers 2 --seed 2000 --markdown \

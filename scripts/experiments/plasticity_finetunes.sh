@@ -30,7 +30,7 @@ evaluate() {  # CKPT SHIFTS NAME
 finetune() {  # NAME TARGET_DATA SHIFT [nsl train options]
   local name=$1 data=$2 shift_spec=$3
   shift 3
-  $NSL train --init ckpt:base --steps 1500 $BASE --data "$data=0.5" --name "$name" "$@"
+  $NSL train --init ckpt:base --steps 1500 --conservative 0 $BASE --data "$data=0.5" --name "$name" "$@"
   evaluate "ckpt:$name@latest" "$shift_spec,base" "$name"
 }
 
@@ -40,7 +40,7 @@ finetune ft-offset25 tgt-offset25 offset_gripper@0.25
 finetune ft-transp60 tgt-transp60 transparent_objects@0.6
 finetune ft-harsh tgt-harsh harsh_lighting
 # the control: the same fine-tune with the base's data only (no target data)
-$NSL train --init ckpt:base --steps 1500 --data grasp-base-oracle=0.5 --data grasp-base-noisy=0.25 \
+$NSL train --init ckpt:base --steps 1500 --conservative 0 --data grasp-base-oracle=0.5 --data grasp-base-noisy=0.25 \
   --data grasp-base-random=0.25 --name ft-baseonly
 evaluate ckpt:ft-baseonly@latest offset_gripper@0.25,transparent_objects@0.6,harsh_lighting,base ft-baseonly
 # remedies on the offset gripper
@@ -53,7 +53,7 @@ finetune ft-offset25-s1 tgt-offset25 offset_gripper@0.25 --seed 1
 finetune ft-offset25-cons-s1 tgt-offset25 offset_gripper@0.25 --conservative 0.3 --seed 1
 # the conservative fine-tune on the other shifts, and its control without target data
 finetune ft-transp60-cons tgt-transp60 transparent_objects@0.6 --conservative 0.3
-$NSL train --init ckpt:base --steps 1500 --data grasp-base-oracle=0.5 --data grasp-base-noisy=0.25 \
+$NSL train --init ckpt:base --steps 1500 --conservative 0 --data grasp-base-oracle=0.5 --data grasp-base-noisy=0.25 \
   --data grasp-base-random=0.25 --name ft-baseonly-cons --conservative 0.3
 evaluate ckpt:ft-baseonly-cons@latest offset_gripper@0.25,transparent_objects@0.6,base ft-baseonly-cons
 

@@ -43,7 +43,7 @@ for s in "${TASKS[@]}"; do
   for seed in 0 1 2; do
     run="es-s$seed-$sl"
     [ -f "$HOME_DIR/runs/$run/early_stop.json" ] && [ "$(tail -1 "$HOME_DIR/runs/$run/curve.csv" | cut -d, -f1)" = 1000 ] ||
-      $NSL train --init ckpt:rounds-r4@6000 --steps 1000 $BASE --data "protocol-rounds-$sl-by-base:800=0.5" \
+      $NSL train --init ckpt:rounds-r4@6000 --steps 1000 --conservative 0 $BASE --data "protocol-rounds-$sl-by-base:800=0.5" \
         --n-step 8 --crop 2 --seed "$seed" --checkpoint-every 250 --eval-every 250 --eval-episodes 200 \
         --base-episodes 200 --eval-scenes 3000 --patience 4 --workers 2 --name "$run"
     for rule in best guard; do

@@ -63,7 +63,7 @@ for s in ${SHIFTS:-harsh_lighting transparent_objects@0.8 checkerboard_backing@0
     $NSL collect --shift "$s" --episodes "$n" --policy ckpt:rounds-r4@6000 --epsilon "${EPSILON:-0.1}" \
       ${NOISE:+--action-noise $NOISE} --data "$target" --seed 5 --workers 2 --batch-size 8
   fi
-  $NSL train --init "${INIT:-ckpt:rounds-r4@6000}" --steps 1000 $BASE --data "$target=0.5" \
+  $NSL train --init "${INIT:-ckpt:rounds-r4@6000}" --steps 1000 --conservative 0 $BASE --data "$target=0.5" \
     --checkpoint-every 500 "${OPTIONS[@]}" --name "$VARIANT-$sl"
   [ -s "$OUT/$sl.json" ] || $NSL eval --checkpoint "ckpt:$VARIANT-$sl@latest" --shift "$evals" --episodes "${EPISODES:-200}" \
     --workers 2 --seed 3000 --json > "$OUT/$sl.json"

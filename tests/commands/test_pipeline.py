@@ -192,6 +192,39 @@ def test_training_records_crop_and_n_step_and_refuses_data_from_an_older_environ
     assert "nsl-grasp-v2" in err and "collect it again" in err and len(err.splitlines()) == 1, err
 
 
+def test_a_fine_tune_without_steps_or_conservative_takes_the_recipes_and_pre_training_must_give_steps(
+        pipeline, monkeypatch, capsys):
+    from nsl.commands import continual, efficiency
+    from nsl.learners import FINE_TUNE_CONSERVATIVE, config as learner_config
+
+    recipe_steps = learner_config.FINE_TUNE_STEPS
+    monkeypatch.setattr(learner_config, "FINE_TUNE_STEPS", 3)  # the recipe's 2,000, shortened for the test
+    assert run_cli("train", "--data", "grasp-base=0.5", "--data", "grasp-harsh=0.5", "--init", "ckpt:base-tiny",
+                   "--name", "recipe-tiny") == 0
+    with Catalog() as cat:
+        entry = cat.resolve_checkpoint("ckpt:recipe-tiny@latest")
+    training = json.loads((Path(entry.path) / "config.json").read_text())["training"]
+    assert (entry.step, training["steps"], training["conservative"]) == (3, 3, FINE_TUNE_CONSERVATIVE)
+    capsys.readouterr()
+    assert run_cli("train", "--data", "grasp-base", "--name", "no-steps") == 2
+    err = capsys.readouterr().err.strip()
+    assert "--steps is required for pre-training" in err and len(err.splitlines()) == 1, err
+    # The commands that fine-tune in loops default to the recipe's steps too.
+    import argparse
+    from nsl.commands import train as train_command
+
+    def subparser(command):
+        parser = argparse.ArgumentParser()
+        command.register(parser.add_subparsers())
+        return next(iter(parser._subparsers._group_actions[0].choices.values()))
+
+    for command in (continual, efficiency):
+        assert subparser(command).get_default("steps") == recipe_steps
+    helps = {a.dest: a.help for a in subparser(train_command)._actions}  # what `nsl train --help` says
+    assert f"fine-tuning: {recipe_steps}" in helps["steps"] and f"{FINE_TUNE_CONSERVATIVE} for fine-tuning" in helps[
+        "conservative"]
+
+
 def test_td_criterion_chooses_a_step_by_held_out_td_error(pipeline, capsys):
     from nsl.eval import read_curve
 

@@ -34,6 +34,26 @@ def test_fine_tuning_starts_from_exactly_the_parent_at_a_quarter_of_its_lr(paren
     assert cfg["data"]["sources"][0]["name"] == "target"
 
 
+def test_a_fine_tune_has_the_recipes_conservative_term_unless_told_and_pre_training_has_none(parent_checkpoint,
+                                                                                                 tmp_path):
+    """The conservative term's weight resolves like the rate: FINE_TUNE_CONSERVATIVE with a parent, 0 without,
+    an explicit value always; the checkpoint records the value the run used, and it reaches the loss."""
+    from nsl.learners import FINE_TUNE_CONSERVATIVE
+
+    def run(name, cfg, **kw):
+        result = train(cfg, TARGET, tmp_path / name, progress=False, **kw)
+        return load_checkpoint(result.checkpoint).config["training"]["conservative"], result
+
+    assert FINE_TUNE_CONSERVATIVE == 0.1
+    assert run("ft", tiny_train(steps=2), init_checkpoint=parent_checkpoint)[0] == FINE_TUNE_CONSERVATIVE
+    assert run("scratch", tiny_train(steps=2), net=TINY_NET)[0] == 0.0
+    assert run("plain", tiny_train(steps=2, conservative=0.0), init_checkpoint=parent_checkpoint)[0] == 0.0
+    used, result = run("strong", tiny_train(steps=5, log_every=5, conservative=0.3), init_checkpoint=parent_checkpoint)
+    assert used == 0.3 and result.metrics["losses/conservative"] > 0
+    _, plain = run("plain5", tiny_train(steps=5, log_every=5, conservative=0.0), init_checkpoint=parent_checkpoint)
+    assert plain.metrics["losses/conservative"] == 0
+
+
 def test_a_fine_tune_has_the_same_id_wherever_its_parent_and_output_are(parent_checkpoint, tmp_path):
     """The id hashes the config, so the config names the parent by content, never by folder."""
     moved = shutil.copytree(parent_checkpoint, tmp_path / "elsewhere" / parent_checkpoint.name)
