@@ -127,11 +127,27 @@ def _read_curve(checkpoint: str):
     return read_curve(path) if path.is_file() else None
 
 
+def _fine_tune_recipe(plan: Plan, name: str) -> dict[str, Any] | None:
+    """The settings the first shift's top-tier fine-tune trained with (from its checkpoint), or None before it."""
+    from nsl.learners import read_config
+
+    from .units import train_tag
+
+    f = plan.finetune
+    entry = actions._checkpoint_at(f"{name}-{train_tag('ft', plan.shifts[0], f.tiers[-1], f.steps, f.seeds[0])}",
+                                   f.steps)
+    if entry is None:
+        return None
+    training = read_config(Path(entry.path))["training"]
+    return {k: training.get(k) for k in ("steps", "lr", "n_step", "augment_crop", "conservative")}
+
+
 def write_study_report(name: str) -> Path:
     """Write records.json, the plots and report.md under the study's folder; returns report.md's path."""
     plan = _load(name)
     folder = study_dir(name)
     records = gather(plan, name, actions.evaluation, _read_curve)
+    records["recipe"] = _fine_tune_recipe(plan, name)
     workspace.atomic_write_json(folder / RECORDS_FILE, records)
     figures = {}
     if any(any(c is not None for v in row["tiers"].values() for c in v) for row in records["finetune"].values()):

@@ -547,6 +547,14 @@ def _save(fig, path: Path) -> Path:
 
 # --- the document ---------------------------------------------------------------------------------------------------
 
+def _recipe_note(recipe: Mapping[str, Any] | None) -> str:
+    """What the fine-tunes' checkpoints record beyond the plan: the rate, n-step, crop and conservative term."""
+    if not recipe:
+        return ""
+    return (f" (learning rate {recipe['lr']:.3g}, {recipe['n_step']}-step returns, crop {recipe['augment_crop']}, "
+            f"conservative term {recipe['conservative'] or 0:g})")
+
+
 def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures: Mapping[str, str]) -> str:
     plan = records["plan"]
     st = status or {}
@@ -569,7 +577,8 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
              "## Challenge table (Table 5.1)", "", challenge_table(records), "",
              "## Fine-tuning by data size (Table 5.2)", "",
              f"Fine-tune all parameters from the base, batches 50/50 base data and the first K target episodes, "
-             f"25% of the base's learning rate and its n-step returns and crop, {plan['finetune']['steps']} steps, seeds "
+             f"25% of the base's learning rate and its n-step returns and crop, {plan['finetune']['steps']} steps"
+             f"{_recipe_note(records.get('recipe'))}, seeds "
              f"{', '.join(map(str, plan['finetune']['seeds']))} (pooled). Success on the shift:", "", tiers_table(records), ""]
     if "tiers" in figures:
         parts += [f"![fine-tuning by data size]({figures['tiers']})", ""]

@@ -62,6 +62,11 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
         assert [(d.dataset, d.tier) for d in ft.data] == [("mini-base-oracle", 12),
                                                           ("mini-harsh-lighting-by-base", 8)]
     assert tiers[0][4].startswith(f"{round(100 * e.successes / 4)}%")
+    # the fine-tunes ran the product's recipe, and the report says so from what the checkpoint recorded
+    from nsl.learners import FINE_TUNE_CONSERVATIVE, load_checkpoint
+    training = load_checkpoint(ft.path).config["training"]
+    assert training["conservative"] == FINE_TUNE_CONSERVATIVE == records["recipe"]["conservative"]
+    assert f"conservative term {FINE_TUNE_CONSERVATIVE:g})" in text
     # tiers are nested views of one 8-episode collection by the base policy, with the plan's epsilon
     v = api.open_version("mini-harsh-lighting-by-base")
     spec = v.provenance["collections"][-1]["spec"]
