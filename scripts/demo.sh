@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The main job, run by `make demo`: the whole nsl pipeline at demo scale (about 5 minutes on 2 cores).
+# The main job, run by `make demo`: the whole nsl pipeline at demo scale (about 8 minutes on 2 cores).
 # Outputs go to $NSL_HOME (make sets NSL_HOME=.nsl-demo in the repo); run it again and every step resumes.
 set -euo pipefail
 NSL=${NSL:-.venv/bin/nsl}
