@@ -30,7 +30,8 @@ __all__ = [
     "cem_maximize", "full_actions", "noise_from_generator", "noise_from_rngs",
     "CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "CONFIG_FILE", "MODEL_FILE", "TRAINER_FILE", "Checkpoint",
     "checkpoint_config", "checkpoint_id", "load_checkpoint", "read_config", "save_checkpoint",
-    "FINE_TUNE_CONSERVATIVE", "FINE_TUNE_STEPS", "METHODS", "CemConfig", "NetConfig", "TrainConfig", "QNetwork", "CEMPolicy", "load_policy",
+    "FINE_TUNE_CONSERVATIVE", "FINE_TUNE_STEPS", "METHODS", "CemConfig", "NetConfig", "TrainConfig", "QNetwork",
+    "CEMPolicy", "load_policy",
     "Learner", "bellman_target", "update", "ArraySampler", "Sampler",
     "FINAL_DIR", "TrainResult", "inherited_settings", "train",
 ]
