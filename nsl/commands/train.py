@@ -166,8 +166,8 @@ def train(*, data: list[str], steps: int | None, name: str, init: str | None = N
           lr: float | None = None, lr_decay: int = 0, weight_decay: float = 0.0, batch_size: int = 64, seed: int = 0,
           checkpoint_every: int = 2000, no_augment: bool = False, conservative: float | None = None,
           n_step: int | None = None, shrink_perturb: str | None = None, crop: int | None = None, net: list[str] = (),
-          eval_every: int = 0, eval_episodes: int = 50, base_episodes: int = 0, target_shift: str | None = None, patience: int = 5,
-          criterion: str = "eval", holdout: float = 0.1, eval_scenes: int = 3000, workers: int = 1):
+          eval_every: int = 0, eval_episodes: int = 50, base_episodes: int = 0, target_shift: str | None = None,
+          patience: int = 5, criterion: str = "eval", holdout: float = 0.1, eval_scenes: int = 3000, workers: int = 1):
     """Train (or resume) run ``name`` and catalogue its checkpoints; returns the final CheckpointEntry.
 
     The keyword arguments are those of ``nsl train`` (``data`` holds the
