@@ -1,11 +1,11 @@
-# Two entry points: `make demo` (install + the main job) and `make test` (install + tests).
+# Two entry points: `make demo` (install + the main job) and `make test` (install + lint + type check + tests).
 VENV ?= .venv
 PY := $(VENV)/bin/python
 NSL := $(VENV)/bin/nsl
 export MUJOCO_GL ?= egl
 export NSL_HOME ?= $(CURDIR)/.nsl-demo
 
-.PHONY: install demo test test-slow bench clean
+.PHONY: install lint demo test test-slow bench clean
 
 $(VENV)/.installed: pyproject.toml
 	@command -v python3 >/dev/null || { echo "python3 (>= 3.11) is required"; exit 1; }
@@ -20,7 +20,12 @@ install: $(VENV)/.installed
 demo: install
 	bash scripts/demo.sh
 
-test: install
+lint: install
+	$(PY) -m ruff check .
+	$(PY) -m ruff format --check .
+	PY=$(PY) bash scripts/typecheck.sh
+
+test: lint
 	$(PY) -m pytest -q
 
 test-slow: install

@@ -248,7 +248,7 @@ def verify(cat: Catalog, refs: Sequence[str] = (), dataset_hasher: Callable[[Pat
     since.  ``dataset_hasher(path) -> hash``, if given, recomputes the
     datasets' own manifest hash and compares it with the registered one.
     """
-    from tqdm import tqdm
+    from nsl.progress import progress_bar
 
     ckpts, datas = [], []
     for ref in refs:
@@ -265,7 +265,7 @@ def verify(cat: Catalog, refs: Sequence[str] = (), dataset_hasher: Callable[[Pat
         ckpts, datas = cat.checkpoints(), cat.datasets()
     report = VerifyReport()
     work = [(True, c) for c in ckpts] + [(False, d) for d in datas]
-    for is_ckpt, e in tqdm(work, desc="verify", unit="entry", disable=not progress):
+    for is_ckpt, e in progress_bar(work, desc="verify", unit="entry", disable=not progress):
         if is_ckpt:
             report.checkpoints += 1
             report.problems += _compare(f"ckpt:{e.ref}", Path(e.path), e.files, None, allow_extra=True)

@@ -205,14 +205,14 @@ class Catalog:
         check_name("checkpoint", name)
         config_bytes = encode_config(config)
         files = content_digests(weights, config_bytes)
-        config = json.loads(config_bytes)  # as it will read back from config.json
-        entry = self._new_checkpoint(checkpoint_id(weights, config), name, step, parent, data, shift, config,
+        stored: dict[str, Any] = json.loads(config_bytes)  # as it will read back from config.json
+        entry = self._new_checkpoint(checkpoint_id(weights, stored), name, step, parent, data, shift, stored,
                                      code_version, Path("."), files)
         existing = self._checkpoint_or_none(entry.id)
         if existing is not None:
             return self._same_or_alias(existing, entry)
         dest = Path(dest) if dest is not None else workspace.checkpoints_dir() / name / f"{step:08d}-{entry.short_id}"
-        write_model_folder(dest, weights, config, self._card(entry, card_info))
+        write_model_folder(dest, weights, stored, self._card(entry, card_info))
         return self._insert_checkpoint(entry, dest)
 
     def register_checkpoint(self, folder: Path | str, *, name: str, step: int, parent: str | None = None,

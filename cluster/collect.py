@@ -34,7 +34,7 @@ from collections import Counter, deque
 from collections.abc import Iterator
 from typing import Any
 
-from .executor import _remote, get
+from .tasks import _remote, get
 
 _WORKER: dict[str, Any] = {}  # in each Ray worker process: the setup of the collection it last served
 

@@ -36,6 +36,8 @@ from typing import Any
 
 from nsl.errors import ConfigError, EnvironmentSetupError, NslError
 
+from .tasks import _remote, get
+
 CLUSTER_ENV = "NSL_CLUSTER"
 INSTALL_HINT = "install it with `pip install 'nsl[ray]'` (in a checkout: `pip install -e '.[ray]'`)"
 LOOPBACK_ENV = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"  # "0": a Ray instance started here binds 127.0.0.1 only
@@ -240,34 +242,6 @@ def open_executor(value: str | None = None, **init_kwargs) -> Executor:
     """The executor for ``--cluster VALUE`` (else ``$NSL_CLUSTER``, else local); use it as a context manager."""
     spec = parse_cluster(value)
     return Executor() if spec == "local" else RayExecutor(spec, init_kwargs)
-
-
-def get(ray, ref):
-    """``ray.get`` that re-raises an nsl error from a task as itself (one line), not wrapped in a Ray error.
-
-    A task that failed for good for the cluster's reasons (its node lost more often than ``max_retries``)
-    becomes a one-line :class:`EnvironmentSetupError`; a bug in the task keeps its traceback.
-    """
-    try:
-        return ray.get(ref)
-    except ray.exceptions.RayTaskError as e:
-        if isinstance(e.cause, NslError):
-            raise e.cause from None
-        raise
-    except ray.exceptions.RayError as e:
-        first = str(e).strip().splitlines()[0] if str(e).strip() else ""
-        raise EnvironmentSetupError(f"the Ray cluster lost a task it could not run again ({type(e).__name__}: "
-                                    f"{first}); run the same command again to resume") from e
-
-
-_REMOTES: dict[Any, Any] = {}
-
-
-def _remote(ray, fn):
-    """``ray.remote(fn)``, made once per function (each call would export it again)."""
-    if fn not in _REMOTES:
-        _REMOTES[fn] = ray.remote(fn)
-    return _REMOTES[fn]
 
 
 def _call_unit(fn, args: tuple, kwargs: dict, marker: str, num_cpus: float):

@@ -12,7 +12,9 @@ reach into the modules)::
     GYM_ID                                      # gymnasium.make(GYM_ID, shift="harsh_lighting")
 
 The names are loaded on first use (a module-level ``__getattr__``), so
-``import nsl.collectors`` does not import MuJoCo.  Importing it registers the
+``import nsl.collectors`` does not import MuJoCo; it does choose the OpenGL
+backend (``MUJOCO_GL``, default ``egl``; a value the user set is kept), which
+MuJoCo reads when it is first imported (:mod:`.gl`).  Importing it registers the
 task with Gymnasium as ``nsl/Grasp-v3`` through a string entry point; MuJoCo
 is imported when ``gymnasium.make`` builds the environment.  (Gymnasium 1.x
 has no plugin entry points; without an import, write
@@ -22,6 +24,10 @@ has no plugin entry points; without an import, write
 from __future__ import annotations
 
 import importlib
+
+from .gl import choose_backend
+
+choose_backend()  # before any module of this package imports mujoco
 
 GYM_ID = "nsl/Grasp-v3"  # the version matches ENV_VERSION ("nsl-grasp-v3"; tests/collectors/test_gym.py checks it)
 

@@ -167,7 +167,7 @@ class GraspEnv(gym.Env):
         if renderer is not None and (renderer.height, renderer.width) != (n, n):
             raise ConfigError(f"shared renderer is {renderer.height}x{renderer.width} but image_size is {n}")
         self._owns_renderer = renderer is None
-        self._renderer = SceneRenderer(n, n) if renderer is None else renderer
+        self._renderer: SceneRenderer | None = SceneRenderer(n, n) if renderer is None else renderer
         self._object_ids = objlib.object_ids(config.split)
         self.model: mujoco.MjModel | None = None
         self.data: mujoco.MjData | None = None
@@ -204,10 +204,10 @@ class GraspEnv(gym.Env):
             placed.append((float(x), float(y), radius))
             out.append(ObjectSpec(
                 mesh_id=self._object_ids[int(idx)],
-                scale=tuple(float(v) for v in scale),
+                scale=(float(scale[0]), float(scale[1]), float(scale[2])),
                 rgba=_random_colour(rng),
                 pos=(float(x), float(y), float(z)),
-                quat=tuple(float(v) for v in q),
+                quat=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
             ))
         return out
 
@@ -215,6 +215,8 @@ class GraspEnv(gym.Env):
         super().reset(seed=seed)
         rng = self.np_random
         self._objects = self._sample_objects(rng)
+        if self._renderer is None:
+            raise RuntimeError("reset() called on a closed environment; make a new one")
         if self.model is not None:
             self._renderer.release(self.model)
         spec = build_spec(self._objects, self.shift, self.config.image_size)
@@ -254,6 +256,7 @@ class GraspEnv(gym.Env):
 
     def _apply_ctrl(self) -> None:
         d, h = self.data, self._h
+        assert d is not None  # reset() built the model
         x, y, z, yaw = self._target
         d.ctrl[h.act["act_x"]], d.ctrl[h.act["act_y"]], d.ctrl[h.act["act_z"]] = x, y, z
         d.ctrl[h.act["act_yaw"]] = yaw
@@ -269,6 +272,7 @@ class GraspEnv(gym.Env):
         are interpolated and the physics is stepped.
         """
         m, d = self.model, self.data
+        assert d is not None  # reset() built the model
         if self._free_space(self._target) and self._free_space(target):
             self._target = target.copy()
             for j, v in zip(("wrist_x", "wrist_y", "wrist_z", "wrist_yaw"), target):
@@ -286,6 +290,7 @@ class GraspEnv(gym.Env):
 
     def _free_space(self, pose: np.ndarray) -> bool:
         """True when the finger tips at wrist pose ``pose`` are clear above every object."""
+        assert self.model is not None and self.data is not None  # reset() built the model
         tops = self.data.xpos[self._h.object_bodies, 2] + self.model.geom_rbound[self._h.object_geoms]
         return bool(pose[2] - self._tip_below_wrist > tops.max() + 0.02)
 
@@ -336,6 +341,7 @@ class GraspEnv(gym.Env):
 
     # -- reading the state ------------------------------------------------------
     def _lifted(self) -> bool:
+        assert self.data is not None  # reset() built the model
         heights = self.data.xpos[self._h.object_bodies, 2]
         return bool((heights > self.config.lift_threshold).any())
 
@@ -344,6 +350,8 @@ class GraspEnv(gym.Env):
 
     def gripper_state(self) -> np.ndarray:
         d, h = self.data, self._h
+        if d is None:
+            raise RuntimeError("gripper_state() called before reset()")
         opening = 0.5 * (d.qpos[h.qpos["finger_left"]] + d.qpos[h.qpos["finger_right"]]) / FINGER_OPEN
         z0, z1 = WRIST_Z_RANGE
         height = (d.qpos[h.qpos["wrist_z"]] - z0) / (z1 - z0)
@@ -352,6 +360,8 @@ class GraspEnv(gym.Env):
         return np.clip(np.array([opening, height, x, y, math.sin(yaw), math.cos(yaw)], dtype=np.float32), -1.0, 1.0)
 
     def render(self) -> np.ndarray:
+        if self._renderer is None:
+            raise RuntimeError("render() called on a closed environment")
         return self._renderer.render(self.model, self.data, self.config.camera)
 
     def _info(self, success: bool) -> dict[str, Any]:
@@ -360,6 +370,8 @@ class GraspEnv(gym.Env):
     def privileged_state(self) -> dict[str, np.ndarray]:
         """Ground truth for scripted policies: gripper pose and object poses and shapes."""
         d, h = self.data, self._h
+        if d is None:
+            raise RuntimeError("privileged_state() called before reset()")
         gripper = np.array([d.qpos[h.qpos[j]] for j in ("wrist_x", "wrist_y", "wrist_z", "wrist_yaw")])
         pos = d.xpos[h.object_bodies].copy()
         mats = d.xmat[h.object_bodies].reshape(-1, 3, 3)
@@ -384,6 +396,7 @@ class GraspEnv(gym.Env):
 
     def _finger_offset(self) -> np.ndarray:
         """Offset of the finger mount from the wrist in the hand frame (the offset shift moves it)."""
+        assert self.model is not None  # reset() built the model
         return np.array(self.model.body("finger_mount").pos[:2])
 
     @property

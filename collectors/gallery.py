@@ -32,7 +32,7 @@ def render_gallery(shifts: list[ShiftSpec], out: Path, episodes: int = 4, seed: 
     finally:
         renderer.close()
     grid = np.concatenate(rows, axis=0)
-    img = Image.fromarray(grid).resize((grid.shape[1] * scale, grid.shape[0] * scale), Image.NEAREST)
+    img = Image.fromarray(grid).resize((grid.shape[1] * scale, grid.shape[0] * scale), Image.Resampling.NEAREST)
     label_w = 170
     canvas = Image.new("RGB", (img.width + label_w, img.height), "white")
     canvas.paste(img, (label_w, 0))

@@ -62,7 +62,7 @@ def parse_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
     v = np.array(_VERTEX.findall(data), dtype=np.float64).reshape(-1, 3)
     tris = _TRIANGLE.findall(data)
     if len(tris) == len(re.findall(rb"^f\s", data, re.M)):
-        fc = np.array(tris, dtype=np.int64).reshape(-1, 3)
+        fc: np.ndarray = np.array(tris, dtype=np.int64).reshape(-1, 3)
     else:
         faces: list[list[int]] = []
         for line in data.decode().splitlines():

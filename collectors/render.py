@@ -5,16 +5,18 @@ renderer per episode would dominate collection.  :class:`SceneRenderer` makes
 the context once and only re-creates the cheap per-model parts (the
 ``MjrContext`` upload and the ``MjvScene``) when the model changes.
 
-``MUJOCO_GL`` must be set before mujoco is imported; :func:`ensure_gl_backend`
-picks EGL when nothing is set and checks that Mesa's libraries exist.
+``MUJOCO_GL`` must be set before mujoco is imported: the package chooses it
+(:mod:`.gl`) before any of its modules imports mujoco; :func:`ensure_gl_backend`
+also checks that the backend's library exists.
 """
 
 from __future__ import annotations
 
 import ctypes.util
-import os
 
 from nsl.errors import EnvironmentSetupError
+
+from .gl import choose_backend
 
 _BACKEND_LIBS = {"egl": ("EGL", "libEGL.so.1"), "osmesa": ("OSMesa", "libOSMesa.so.8"), "glfw": ("GL", "libGL.so.1")}
 SETUP_HINT = (
@@ -25,9 +27,7 @@ SETUP_HINT = (
 
 def ensure_gl_backend() -> str:
     """Set ``MUJOCO_GL`` (default ``egl``) and check its library is installed."""
-    backend = os.environ.setdefault("MUJOCO_GL", "egl").lower()
-    if backend == "egl":
-        os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    backend = choose_backend()
     libs = _BACKEND_LIBS.get(backend)
     if libs is not None and ctypes.util.find_library(libs[0]) is None:
         try:
@@ -47,7 +47,7 @@ class SceneRenderer:
     """Renders one camera of whatever model it is given, reusing its GL context."""
 
     def __init__(self, height: int, width: int, max_geom: int = 200):
-        self._contexts = {}
+        self._contexts: dict[int, tuple[mujoco.MjModel, mujoco.MjrContext, mujoco.MjvScene]] = {}
         self._pool: dict[tuple, list[mujoco.MjrContext]] = {}
         from mujoco import gl_context
 
@@ -57,7 +57,7 @@ class SceneRenderer:
             self._gl.make_current()
         except Exception as e:  # noqa: BLE001 - any GL failure means no backend
             raise EnvironmentSetupError(f"could not create an OpenGL context ({e}); {SETUP_HINT}") from None
-        self._contexts: dict[int, tuple[mujoco.MjModel, mujoco.MjrContext, mujoco.MjvScene]] = {}
+        self._contexts = {}
         self.max_models = 16  # several environments in one process share this renderer
         self._opt = mujoco.MjvOption()
         self._cam = mujoco.MjvCamera()

@@ -94,6 +94,7 @@ def _run_batch(envs: list[GraspEnv], policy: Policy, indices: list[int], seed: i
     out = []
     for j, i in enumerate(indices):
         f, e = frames[j], ends[j]
+        assert e is not None  # the loop above runs until every episode has ended
         out.append(Episode(
             index=i,
             images=np.stack(f["images"]),

@@ -149,7 +149,7 @@ SHIFT_NAMES = (BASE, *SHIFTS)
 
 # The study's five challenges as this suite measures them: each shift at the severity whose cost to the shipped
 # base (ckpt:base) is closest to the study's drop in Table 5.1, within 15 points of it and at least 10
-# (scripts/experiments/calibrate_shifts.py on selection scenes; docs/experiments.md, "Calibrating the shifts").
+# (scripts/experiments/calibrate_shifts.py on selection scenes; docs/experiments/shifts.md).
 # Severity 1 keeps its meaning, so datasets of any severity stay valid; ``--shift study`` is this list.
 STUDY_SEVERITIES = {"harsh_lighting": 2.0, "transparent_objects": 0.8, "checkerboard_backing": 0.4,
                     "extend_gripper": 2.0, "offset_gripper": 0.25}

@@ -5,6 +5,7 @@ Other folders import only this module (``from nsl.datasets import api``)::
     parse_ref, resolve, dataset_names, list_versions     # references NAME[@vN][:K]
     dataset_root                                         # $NSL_HOME/datasets/NAME (versions, .staging)
     open_version, open_view, episode_split               # reading (DatasetVersion, DatasetView)
+    frame_labels, FrameLabels                            # per-frame success, next-frame masks, MC returns
     Collection, write_dataset, unfinished                # writing (resumable, append-only)
     make_sampler, Sampler                                # the training loader
     verify, tiers, list_datasets, export                 # maintenance
@@ -24,6 +25,7 @@ from . import layout
 from .collection import Collection, unfinished, write_dataset
 from .export import export as _export
 from .hf import to_hf_dataset
+from .labels import FrameLabels, frame_labels
 from .loader import Sampler, TransitionSource, image_cache, make_sampler
 from .reader import DatasetVersion, DatasetView, open_version, open_view
 from .versions import STANDARD_TIERS, Ref, dataset_names, dataset_root, list_versions, parse_ref, resolve
@@ -31,7 +33,7 @@ from .versions import verify as _verify
 from .writer import EpisodeLike
 
 __all__ = [
-    "Collection", "DatasetVersion", "DatasetView", "EpisodeLike", "Ref", "STANDARD_TIERS", "Sampler",
+    "Collection", "DatasetVersion", "DatasetView", "EpisodeLike", "FrameLabels", "frame_labels", "Ref", "STANDARD_TIERS", "Sampler",
     "TransitionSource", "dataset_names", "dataset_root", "episode_split", "export", "image_cache", "layout",
     "list_datasets", "list_versions", "make_sampler", "open_version", "open_view", "parse_ref", "resolve",
     "tiers", "to_hf_dataset", "unfinished", "verify", "write_dataset",
@@ -41,6 +43,7 @@ __all__ = [
 def verify(ref: str) -> dict[str, Any]:
     """Re-hash every file of a version; CorruptDataError names the first bad file."""
     r, root = resolve(ref)
+    assert r.version is not None  # resolve() fills in the version
     label = f"{r.name}@v{r.version}"
     h = _verify(root, label=label)
     v = DatasetVersion(r.name, r.version, root)

@@ -81,7 +81,7 @@ class Collection:
                     f"{parent.image_size}px); appending needs the same shift, policy, seed and image size, "
                     f"or choose a new --dataset name")
             episodes_per_file = int(parent.provenance.get("episodes_per_file", episodes_per_file))
-        plan = {"format": layout.NSL_FORMAT, "start": start, "stop": max(start, episodes),
+        plan: dict[str, Any] = {"format": layout.NSL_FORMAT, "start": start, "stop": max(start, episodes),
                 "episodes_per_file": episodes_per_file, "image_size": image_size, "spec": spec,
                 "parent": parent.hash if parent else None,
                 "first_file": _num_files(parent) if parent else 0}

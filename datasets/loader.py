@@ -196,7 +196,7 @@ class Sampler:
 
     def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
         b, s = int(batch_size), self.image_size
-        out = {
+        out: dict[str, np.ndarray] = {
             keys.OBS_IMAGE: np.empty((b, s, s, 3), np.uint8), keys.NEXT_OBS_IMAGE: np.empty((b, s, s, 3), np.uint8),
             keys.OBS_STATE: np.empty((b, keys.STATE_DIM), np.float32),
             keys.NEXT_OBS_STATE: np.empty((b, keys.STATE_DIM), np.float32),

@@ -60,7 +60,7 @@ def decode_png(data: bytes, path: Path | str = "") -> np.ndarray:
 
 def read_episode_stats(root: Path, episode_files: list[str]) -> list[statslib.Stats]:
     """The per-episode stats stored in ``meta/episodes`` files, in order."""
-    out = []
+    out: list[statslib.Stats] = []
     for f in sorted(episode_files):
         t = read_parquet(Path(root) / f)
         cols = [c for c in t.column_names if c.startswith("stats/")]
@@ -297,6 +297,7 @@ class DatasetView:
 
 def open_version(ref: str | versions.Ref) -> DatasetVersion:
     r, root = versions.resolve(ref)
+    assert r.version is not None  # resolve() fills in the version
     return DatasetVersion(r.name, r.version, root)
 
 
@@ -305,6 +306,7 @@ def open_view(ref: str | versions.Ref | DatasetView) -> DatasetView:
     if isinstance(ref, DatasetView):
         return ref
     r, root = versions.resolve(ref)
+    assert r.version is not None  # resolve() fills in the version
     v = DatasetVersion(r.name, r.version, root)
     if r.tier is not None and r.tier > v.num_episodes:
         raise ConfigError(f"tier {r.tier} of {v.ref} is larger than the version ({v.num_episodes} episodes); "

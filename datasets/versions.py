@@ -113,7 +113,7 @@ def build_manifest(root: Path, known: dict[str, dict[str, Any]] | None = None,
         size = p.stat().st_size
         k = (known or {}).get(rel)
         same_inode = k is not None and k.get("_inode") == (p.stat().st_ino, p.stat().st_dev) and k["size"] == size
-        files[rel] = {"size": size, "sha256": k["sha256"] if same_inode else file_sha256(p)}
+        files[rel] = {"size": size, "sha256": k["sha256"] if same_inode and k is not None else file_sha256(p)}
     return {"format": layout.NSL_FORMAT, "hash": hash_of(files), "files": files, "created": created or {}}
 
 

@@ -23,14 +23,16 @@ imports ``nsl.learners`` (Q-values for the offline criteria come from the caller
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from nsl.lazy import lazy_exports
 
 _EXPORTS = {
     "stats": ("SuccessRate", "markdown_table", "success_rate_from_outcomes", "wilson_interval"),
-    "success": ("EvalConfig", "evaluate", "evaluate_outcomes", "run_eval_episodes"),
+    "config": ("CRITERIA", "EarlyStopConfig", "EarlyStopping", "EvalConfig"),
+    "success": ("evaluate", "evaluate_outcomes", "run_eval_episodes"),
     "paired": ("PairedComparison", "compare_paired", "mcnemar_exact", "paired_difference_interval"),
-    "early_stopping": ("CRITERIA", "CriterionChoice", "EarlyStopConfig", "EarlyStopMonitor", "EarlyStopping",
+    "early_stopping": ("CriterionChoice", "EarlyStopMonitor",
                        "choices_table", "choose_steps", "held_out_episodes", "load_early_stop", "offline_scores",
                        "q_ranking_auc", "simulator_scorer", "soft_opc", "td_error"),
     "continual": ("ContinualMetrics", "continual_metrics", "curve_auc"),
@@ -39,27 +41,14 @@ _EXPORTS = {
     "report": ("ReportResult", "matrix_table", "tiers_table", "write_report"),
     "plots": ("plot_curve", "plot_matrix", "plot_tiers"),
 }
-_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
-__all__ = sorted(_MODULE_OF)
-
-
-def __getattr__(name: str) -> Any:
-    module = _MODULE_OF.get(name)
-    if module is None:
-        raise AttributeError(f"module 'nsl.eval' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value  # later look-ups skip this function
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__all__, __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 
 
 if TYPE_CHECKING:  # static analysers see the eager imports
     from .continual import ContinualMetrics, continual_metrics, curve_auc  # noqa: F401
-    from .early_stopping import (CRITERIA, CriterionChoice, EarlyStopConfig, EarlyStopMonitor,  # noqa: F401
-                                 EarlyStopping, choices_table, choose_steps, held_out_episodes, load_early_stop,
+    from .config import CRITERIA, EarlyStopConfig, EarlyStopping, EvalConfig  # noqa: F401
+    from .early_stopping import (CriterionChoice, EarlyStopMonitor,  # noqa: F401
+                                 choices_table, choose_steps, held_out_episodes, load_early_stop,
                                  offline_scores, q_ranking_auc, simulator_scorer, soft_opc, td_error)
     from .paired import PairedComparison, compare_paired, mcnemar_exact, paired_difference_interval  # noqa: F401
     from .plots import plot_curve, plot_matrix, plot_tiers  # noqa: F401
@@ -68,4 +57,4 @@ if TYPE_CHECKING:  # static analysers see the eager imports
                           write_curve)
     from .report import ReportResult, matrix_table, tiers_table, write_report  # noqa: F401
     from .stats import SuccessRate, markdown_table, success_rate_from_outcomes, wilson_interval  # noqa: F401
-    from .success import EvalConfig, evaluate, evaluate_outcomes, run_eval_episodes  # noqa: F401
+    from .success import evaluate, evaluate_outcomes, run_eval_episodes  # noqa: F401

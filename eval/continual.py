@@ -157,8 +157,8 @@ def continual_metrics(matrix: PerformanceMatrix) -> ContinualMetrics:
         final, own, initial = cell(T, j), cell(t, j), cell(0, j)
         out["final"][task] = final
         out["own_stage"][task] = own
-        earlier = [cell(i, j) for i in range(t, T)] if t is not None else []
-        earlier = [v for v in earlier if v is not None]
+        cells = [cell(i, j) for i in range(t, T)] if t is not None else []
+        earlier = [v for v in cells if v is not None]
         out["forgetting"][task] = (max(earlier) - final) if earlier and final is not None else None
         out["forgetting_end"][task] = diff(own, final) if t is not None and t < T else None
         out["backward_transfer"][task] = diff(final, own) if t is not None and t < T else None
@@ -168,7 +168,11 @@ def continual_metrics(matrix: PerformanceMatrix) -> ContinualMetrics:
         out["zero_shot_transfer"][task] = diff(cell(t - 1, j), initial) if t is not None and t >= 1 else None
         out["vs_base"][task] = diff(own, initial) if t is not None and t >= 1 else None
         single = None if m.single is None else m.single.get(task)
-        single = None if single is None else Rate.of(single).success_rate
+        if single is not None:
+            single_rate = Rate.of(single)
+            if single_rate is None:
+                raise ConfigError(f"the single-step success for {task!r} is not a number; store a fraction in [0, 1]")
+            single = single_rate.success_rate
         out["vs_single"][task] = diff(own, single) if t is not None and t >= 1 else None
         out["final_vs_single"][task] = diff(final, single)
     return ContinualMetrics(m, trained_at, _mean(out["final"].values()), **out)

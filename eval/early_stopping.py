@@ -29,25 +29,18 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from nsl.errors import ConfigError, CorruptDataError
 from nsl.workspace import atomic_write_json
 
 from .records import CURVE_FILE, EARLY_STOP_FILE, CurveRow, Rate, read_curve, write_curve
-from .success import EvalConfig, SuccessRate, run_eval_episodes
-
-# criterion -> (curve column, mode)
-CRITERIA: dict[str, tuple[str, str]] = {
-    "eval": ("target_success", "max"),
-    "softopc": ("softopc", "max"),
-    "auc": ("auc", "max"),
-    "td": ("td_error", "min"),
-}
-
+from .config import CRITERIA, EarlyStopConfig, EarlyStopping, EvalConfig  # noqa: F401  (re-exported)
+from .success import SuccessRate, run_eval_episodes
 
 # --- offline criteria -----------------------------------------------------------------------------------------------
 
-def _q_and_labels(q: Sequence[float], success: Sequence[bool], what: str) -> tuple[np.ndarray, np.ndarray]:
+def _q_and_labels(q: ArrayLike, success: ArrayLike, what: str) -> tuple[np.ndarray, np.ndarray]:
     qa = np.asarray(q, dtype=np.float64).ravel()
     sa = np.asarray(success, dtype=bool).ravel()
     if len(qa) != len(sa):
@@ -59,13 +52,13 @@ def _q_and_labels(q: Sequence[float], success: Sequence[bool], what: str) -> tup
     return qa, sa
 
 
-def soft_opc(q: Sequence[float], success: Sequence[bool]) -> float:
+def soft_opc(q: ArrayLike, success: ArrayLike) -> float:
     """SoftOPC: mean Q on transitions of successful episodes minus mean Q on all held-out transitions."""
     qa, sa = _q_and_labels(q, success, "SoftOPC")
     return float(qa[sa].mean() - qa.mean())
 
 
-def q_ranking_auc(q: Sequence[float], success: Sequence[bool]) -> float:
+def q_ranking_auc(q: ArrayLike, success: ArrayLike) -> float:
     """Area under the ROC curve of Q separating successes from failures (Mann-Whitney, ties count 1/2)."""
     qa, sa = _q_and_labels(q, success, "Q-ranking AUC")
     if sa.all():
@@ -84,7 +77,7 @@ def q_ranking_auc(q: Sequence[float], success: Sequence[bool]) -> float:
     return float((ranks[sa].sum() - n_pos * (n_pos + 1) / 2.0) / (n_pos * n_neg))
 
 
-def td_error(q: Sequence[float], target: Sequence[float]) -> float:
+def td_error(q: ArrayLike, target: ArrayLike) -> float:
     """Mean squared TD error of held-out transitions: mean((Q(s, a) - (r + gamma * max Q'(s', a')))^2)."""
     qa = np.asarray(q, dtype=np.float64).ravel()
     ta = np.asarray(target, dtype=np.float64).ravel()
@@ -95,7 +88,7 @@ def td_error(q: Sequence[float], target: Sequence[float]) -> float:
     return float(np.mean((qa - ta) ** 2))
 
 
-def offline_scores(q: Sequence[float], success: Sequence[bool], target: Sequence[float] | None = None) -> dict:
+def offline_scores(q: ArrayLike, success: ArrayLike, target: ArrayLike | None = None) -> dict:
     """All offline criteria at once: ``{"softopc", "auc", "td_error" (if target given), "q_mean"}``."""
     out = {"softopc": soft_opc(q, success), "auc": q_ranking_auc(q, success),
            "q_mean": float(np.mean(np.asarray(q, dtype=np.float64)))}
@@ -115,115 +108,6 @@ def held_out_episodes(n_episodes: int, fraction: float, seed: int) -> np.ndarray
 
 
 # --- the stopping rule ----------------------------------------------------------------------------------------------
-
-class EarlyStopping:
-    """Stop after ``patience`` consecutive evaluations that do not improve on the best by more than ``min_delta``.
-
-    ``update(step, value)`` returns True once the patience is used up.  A NaN
-    value never improves.  The whole curve is kept in ``history``.
-    """
-
-    def __init__(self, patience: int, min_delta: float = 0.0, mode: str = "max"):
-        if not isinstance(patience, int) or patience < 1:
-            raise ConfigError(f"patience {patience!r} must be an integer of at least 1 (evaluations)")
-        if min_delta < 0:
-            raise ConfigError(f"min_delta {min_delta!r} must be >= 0")
-        if mode not in ("max", "min"):
-            raise ConfigError(f"mode {mode!r} is unknown; use 'max' or 'min'")
-        self.patience, self.min_delta, self.mode = patience, float(min_delta), mode
-        self.history: list[tuple[int, float]] = []
-        self.best_step: int | None = None
-        self.best_value: float | None = None
-        self.bad_evals = 0  # consecutive evaluations without improvement
-        self.stopped_step: int | None = None
-
-    def improves(self, value: float) -> bool:
-        if math.isnan(value):
-            return False
-        if self.best_value is None:
-            return True
-        if self.mode == "max":
-            return value > self.best_value + self.min_delta
-        return value < self.best_value - self.min_delta
-
-    def update(self, step: int, value: float | None) -> bool:
-        value = math.nan if value is None else float(value)
-        if self.history and step <= self.history[-1][0]:
-            raise ConfigError(f"early stopping got step {step} after step {self.history[-1][0]}; steps must increase")
-        self.history.append((int(step), value))
-        if self.improves(value):
-            self.best_step, self.best_value, self.bad_evals = int(step), value, 0
-        else:
-            self.bad_evals += 1
-        if self.bad_evals >= self.patience and self.stopped_step is None:
-            self.stopped_step = int(step)
-        return self.should_stop
-
-    @property
-    def should_stop(self) -> bool:
-        return self.stopped_step is not None
-
-    def state_dict(self) -> dict:
-        return {"patience": self.patience, "min_delta": self.min_delta, "mode": self.mode,
-                "best_step": self.best_step, "best_value": self.best_value, "bad_evals": self.bad_evals,
-                "stopped_step": self.stopped_step, "history": [list(h) for h in self.history]}
-
-
-@dataclass(frozen=True)
-class EarlyStopConfig:
-    """``nsl train --early-stop``: what is evaluated, how often, and when to stop."""
-
-    every: int = 2000  # gradient steps between evaluations (the trainer's eval_every)
-    episodes: int = 50  # simulator episodes on the target shift per evaluation (0: offline criteria only)
-    base_episodes: int = 50  # episodes on the base task per evaluation, to see forgetting (0: skip)
-    patience: int = 5  # evaluations without improvement before stopping
-    min_delta: float = 0.0  # smallest improvement that counts (success fraction, or criterion units)
-    criterion: str = "eval"  # what decides: eval (target success) | softopc | auc | td (held-out TD error)
-    seed: int = 2000  # evaluation scene seeds, the same at every step (paired across steps)
-    held_out: float = 0.1  # fraction of target episodes held out for the offline criteria
-
-    def __post_init__(self):
-        if self.criterion not in CRITERIA:
-            raise ConfigError(f"early-stop criterion {self.criterion!r} is unknown; use one of {', '.join(CRITERIA)}")
-        if self.every < 1:
-            raise ConfigError(f"early-stop every {self.every!r} must be at least 1 gradient step")
-        if self.episodes < 0 or self.base_episodes < 0:
-            raise ConfigError(f"early-stop episodes ({self.episodes}, base {self.base_episodes}) must be >= 0")
-        if self.criterion == "eval" and self.episodes < 1:
-            raise ConfigError("early-stop criterion 'eval' needs episodes >= 1; or choose softopc, auc or td")
-        if not isinstance(self.patience, int) or self.patience < 1:
-            raise ConfigError(f"early-stop patience {self.patience!r} must be an integer of at least 1")
-        if self.min_delta < 0:
-            raise ConfigError(f"early-stop min_delta {self.min_delta!r} must be >= 0")
-        if not 0.0 < self.held_out < 1.0:
-            raise ConfigError(f"early-stop held_out {self.held_out!r} must be between 0 and 1 (e.g. 0.1)")
-
-    @property
-    def column(self) -> str:
-        return CRITERIA[self.criterion][0]
-
-    @property
-    def mode(self) -> str:
-        return CRITERIA[self.criterion][1]
-
-    def stopper(self) -> EarlyStopping:
-        return EarlyStopping(self.patience, self.min_delta, self.mode)
-
-    def eval_config(self, base: bool = False, **overrides: Any) -> EvalConfig:
-        """The EvalConfig of one evaluation (``base=True``: the base-task episodes)."""
-        return EvalConfig(**{"episodes": self.base_episodes if base else self.episodes, "seed": self.seed,
-                             **overrides})
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: Mapping) -> EarlyStopConfig:
-        unknown = sorted(set(d) - set(cls.__dataclass_fields__))
-        if unknown:
-            raise ConfigError(f"unknown early-stop setting(s) {unknown}; known: {sorted(cls.__dataclass_fields__)}")
-        return cls(**d)
-
 
 # --- the trainer's eval_fn ------------------------------------------------------------------------------------------
 
@@ -265,7 +149,7 @@ class EarlyStopMonitor:
     on_best: Callable[[int, Any], None] | None = None
     references: Mapping[str, float] = field(default_factory=dict)  # horizontal lines in the plot, e.g. scratch
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.run_dir = Path(self.run_dir)
         if self.config.criterion == "eval" and self.score_target is None:
             raise ConfigError("early-stop criterion 'eval' needs a target scorer (simulator episodes)")
@@ -356,9 +240,9 @@ def choose_steps(rows: Sequence[CurveRow], patience: int | None = None,
         raise ConfigError("choosing a step needs a curve with at least one evaluation; got none")
     by_step = {r.step: r for r in rows}
     picks: dict[str, tuple[int, int | None]] = {}
-    measured = [r for r in rows if r.target is not None]
+    measured = [(r, r.target) for r in rows if r.target is not None]
     if measured:
-        best = max(measured, key=lambda r: (r.target.success_rate, -r.step))
+        best, _ = max(measured, key=lambda m: (m[1].success_rate, -m[0].step))
         picks["best"] = (best.step, None)
     for name, (column, mode) in CRITERIA.items():
         seen = [r for r in rows if r.value(column) is not None]
@@ -376,7 +260,7 @@ def choose_steps(rows: Sequence[CurveRow], patience: int | None = None,
         r = by_step[step]
         gap = None if best_row is None else step - best_row.step
         regret = None
-        if best_row is not None and r.target is not None:
+        if best_row is not None and best_row.target is not None and r.target is not None:
             regret = best_row.target.success_rate - r.target.success_rate
         out[name] = CriterionChoice(name, step, stopped, r.target, r.base, gap, regret)
     return out

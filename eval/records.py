@@ -23,7 +23,7 @@ import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, overload
 
 from nsl.errors import ConfigError, CorruptDataError
 from nsl.workspace import atomic_write_bytes, atomic_write_json
@@ -69,6 +69,12 @@ class Rate:
         if self.episodes is not None and self.episodes < 1:
             raise ConfigError(f"episodes {self.episodes!r} must be at least 1 (or None if unknown)")
 
+    @overload
+    @classmethod
+    def of(cls, value: Rate | SuccessRate | Mapping) -> Rate: ...
+    @overload
+    @classmethod
+    def of(cls, value: Rate | SuccessRate | Mapping | float | None) -> Rate | None: ...
     @classmethod
     def of(cls, value: Rate | SuccessRate | Mapping | float | None) -> Rate | None:
         """Accept a Rate, a SuccessRate, a ``{"success_rate"|"successes", "episodes"}`` dict or a fraction."""
@@ -256,11 +262,10 @@ class PerformanceMatrix:
         unknown = sorted(set(rates) - set(self.tasks))
         if unknown:
             raise ConfigError(f"results for unknown tasks {unknown}; the matrix tasks are {list(self.tasks)}")
-        success = [*self.success, [None if rates.get(t) is None else rates[t].success_rate for t in self.tasks]]
-        old = self.episodes or [[None] * len(self.tasks) for _ in self.success]
-        episodes = [*old, [None if rates.get(t) is None else rates[t].episodes for t in self.tasks]]
-        if all(n is None for row in episodes for n in row):
-            episodes = None
+        success = (*self.success, tuple(None if (r := rates.get(t)) is None else r.success_rate for t in self.tasks))
+        old = self.episodes or tuple((None,) * len(self.tasks) for _ in self.success)
+        counts = (*old, tuple(None if (r := rates.get(t)) is None else r.episodes for t in self.tasks))
+        episodes = None if all(n is None for row in counts for n in row) else counts
         return PerformanceMatrix(self.tasks, (*self.stages, stage), success, episodes, self.base_task, self.single,
                                  self.reference, self.curves, self.reference_curves)
 

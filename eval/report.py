@@ -58,8 +58,8 @@ def tiers_table(tiers: TierResults, intervals: bool = True) -> str:
             cells.append(f"{100 * best:.0f}%{change} @{k_best}")
         else:
             cells.append("-")
-        cells += ["-" if (row.comparisons or {}).get(c) is None else row.comparisons[c].percent(intervals)
-                  for c in comps]
+        comparisons = row.comparisons or {}
+        cells += ["-" if comparisons.get(c) is None else comparisons[c].percent(intervals) for c in comps]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

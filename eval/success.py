@@ -10,26 +10,12 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 
-from tqdm import tqdm
+from nsl.progress import progress_bar
 
 from nsl.collectors import EnvConfig, Episode, ShiftSpec, collect_episodes
 
+from .config import EvalConfig  # noqa: F401  (re-exported)
 from .stats import SuccessRate, markdown_table, success_rate_from_outcomes, wilson_interval  # noqa: F401
-
-
-@dataclass(frozen=True)
-class EvalConfig:
-    """How a policy is evaluated; saved with every evaluation."""
-
-    episodes: int = 100  # episodes per shift
-    split: str = "test"  # object split: held-out test objects by default
-    seed: int = 1000  # scene seeds (seed, i); equal seeds give paired comparisons
-    workers: int = 1  # processes
-    batch: int = 8  # environments per worker stepping in lock-step (batched policy calls)
-    image_size: int = 64
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 def evaluate(make_policy: Callable, shifts: Sequence[ShiftSpec], config: EvalConfig, env_overrides: dict | None = None,
@@ -46,7 +32,7 @@ def run_eval_episodes(make_policy: Callable, shift: ShiftSpec, config: EvalConfi
                       progress: bool = True, runner: Callable | None = None) -> list[Episode]:
     env_config = EnvConfig(shift=shift.name, split=config.split, image_size=config.image_size, **(env_overrides or {}))
     out = []
-    bar = tqdm(total=config.episodes, desc=f"eval {shift.name}", unit="ep", disable=not progress, leave=False)
+    bar = progress_bar(total=config.episodes, desc=f"eval {shift.name}", unit="ep", disable=not progress, leave=False)
     for ep in collect_episodes(env_config, make_policy, range(config.episodes), config.seed, config.workers,
                                config.batch, runner=runner):
         out.append(ep)

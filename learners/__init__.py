@@ -13,25 +13,40 @@ Public surface (other folders import these from ``nsl.learners`` only)::
     Checkpoint, load_checkpoint, save_checkpoint, checkpoint_config, checkpoint_id, read_config
     CEMPolicy, load_policy                             # a checkpoint acting in the collectors
 
-The learner knows no simulator: it never imports ``nsl.collectors`` or ``nsl.eval``.
+Each name loads its module on first use, so ``from nsl.learners import TrainConfig``
+loads no PyTorch.  The learner knows no simulator: it never imports ``nsl.collectors`` or ``nsl.eval``.
 """
 
-from .cem import cem_maximize, full_actions, noise_from_generator, noise_from_rngs
-from .checkpoint import (CHECKPOINT_FORMAT, CHECKPOINT_VERSION, CONFIG_FILE, MODEL_FILE, TRAINER_FILE, Checkpoint,
-                         checkpoint_config, checkpoint_id, load_checkpoint, read_config, save_checkpoint)
-from .config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_STEPS, METHODS, CemConfig, NetConfig, TrainConfig
-from .networks import QNetwork
-from .policy import CEMPolicy, load_policy
-from .qtopt import Learner, bellman_target, update
-from .sampler import ArraySampler, Sampler
-from .train import FINAL_DIR, TrainResult, inherited_settings, train
+from __future__ import annotations
 
-__all__ = [
-    "cem_maximize", "full_actions", "noise_from_generator", "noise_from_rngs",
-    "CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "CONFIG_FILE", "MODEL_FILE", "TRAINER_FILE", "Checkpoint",
-    "checkpoint_config", "checkpoint_id", "load_checkpoint", "read_config", "save_checkpoint",
-    "FINE_TUNE_CONSERVATIVE", "FINE_TUNE_STEPS", "METHODS", "CemConfig", "NetConfig", "TrainConfig", "QNetwork",
-    "CEMPolicy", "load_policy",
-    "Learner", "bellman_target", "update", "ArraySampler", "Sampler",
-    "FINAL_DIR", "TrainResult", "inherited_settings", "train",
-]
+from typing import TYPE_CHECKING
+
+from nsl.lazy import lazy_exports
+
+_EXPORTS = {
+    "cem": ("cem_maximize", "full_actions", "noise_from_generator", "noise_from_rngs"),
+    "checkpoint": ("CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "CONFIG_FILE", "MODEL_FILE", "TRAINER_FILE",
+                   "Checkpoint", "checkpoint_config", "checkpoint_id", "load_checkpoint", "read_config",
+                   "save_checkpoint"),
+    "config": ("FINE_TUNE_CONSERVATIVE", "FINE_TUNE_STEPS", "METHODS", "CemConfig", "NetConfig", "TrainConfig"),
+    "networks": ("QNetwork",),
+    "policy": ("CEMPolicy", "load_policy"),
+    "qtopt": ("Learner", "bellman_target", "update"),
+    "sampler": ("ArraySampler", "Sampler"),
+    "training": ("FINAL_DIR", "TrainResult", "inherited_settings", "train"),
+}
+__all__, __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
+
+
+if TYPE_CHECKING:  # static analysers see the eager imports
+    from .cem import cem_maximize, full_actions, noise_from_generator, noise_from_rngs  # noqa: F401
+    from .checkpoint import (CHECKPOINT_FORMAT, CHECKPOINT_VERSION, CONFIG_FILE, MODEL_FILE,  # noqa: F401
+                             TRAINER_FILE, Checkpoint, checkpoint_config, checkpoint_id, load_checkpoint,
+                             read_config, save_checkpoint)
+    from .config import (FINE_TUNE_CONSERVATIVE, FINE_TUNE_STEPS, METHODS, CemConfig, NetConfig,  # noqa: F401
+                         TrainConfig)
+    from .networks import QNetwork  # noqa: F401
+    from .policy import CEMPolicy, load_policy  # noqa: F401
+    from .qtopt import Learner, bellman_target, update  # noqa: F401
+    from .sampler import ArraySampler, Sampler  # noqa: F401
+    from .training import FINAL_DIR, TrainResult, inherited_settings, train  # noqa: F401

@@ -24,8 +24,8 @@ POOLS = ("flatten", "max", "spatial")
 NORMS = ("none", "group")
 METHODS = ("scratch", "ft", "new_head", "pnn", "ft_pnn")
 FINE_TUNE_LR_FACTOR = 0.25  # fine-tuning learning rate = 25% of the parent's (the study's recipe)
-# The fine-tuning recipe's other two settings, chosen on selection scenes (docs/experiments.md, "A conservative
-# term in the Monte-Carlo fine-tune"): the conservative term's weight and the number of gradient steps.
+# The fine-tuning recipe's other two settings, chosen on selection scenes: the conservative term's weight and the
+# number of gradient steps (docs/experiments/conservative-fine-tune.md).
 FINE_TUNE_CONSERVATIVE = 0.1
 FINE_TUNE_STEPS = 2000
 

@@ -50,6 +50,8 @@ def coordinate_planes(n: int) -> torch.Tensor:
 class QColumn(nn.Module):
     """One column: conv trunk, per-state context, per-candidate head, and laterals from ``n_lateral`` earlier columns."""
 
+    coords: torch.Tensor  # a buffer, registered with pool "spatial"
+
     def __init__(self, cfg: NetConfig, n_lateral: int = 0):
         super().__init__()
         self.n_lateral = n_lateral
@@ -68,7 +70,7 @@ class QColumn(nn.Module):
         h = cfg.hidden
         if cfg.pool == "spatial":
             # per position: W_f [features, coordinates] + W_s state (once per state), then + W_a action
-            self.state_fc = nn.Conv2d(cfg.conv_channels[-1] + 2, h, 1)
+            self.state_fc: nn.Module = nn.Conv2d(cfg.conv_channels[-1] + 2, h, 1)
             self.state_proj = nn.Linear(cfg.state_dim, h, bias=False)
             self.spatial_fc = nn.Conv2d(h, h, 1)
             self.register_buffer("coords", coordinate_planes(cfg.feature_size), persistent=False)
@@ -87,7 +89,7 @@ class QColumn(nn.Module):
     def _lat(self, name: str, inputs: list[torch.Tensor]) -> torch.Tensor | int:
         if not self.n_lateral:
             return 0
-        return sum(m(x) for m, x in zip(self.lateral[name], inputs))
+        return sum(m(x) for m, x in zip(self.lateral[name], inputs))  # type: ignore[call-overload]  # torch stubs: ModuleDict item is Module
 
     def encode(self, x: torch.Tensor, state: torch.Tensor, prev: list[dict]) -> dict:
         """Per-state activations: ``convs`` (list), ``flat`` and the context ``ctx`` (B, hidden)."""
@@ -127,6 +129,8 @@ class QColumn(nn.Module):
 class QNetwork(nn.Module):
     """Q(image, state, action) as logits; one column, or a progressive network of several."""
 
+    coords: torch.Tensor | None  # a buffer with coord_channels, else None
+
     def __init__(self, cfg: NetConfig):
         super().__init__()
         self.cfg = cfg
@@ -153,7 +157,7 @@ class QNetwork(nn.Module):
         x = self._input(image)
         caches: list[dict] = []
         for col in self.columns:
-            caches.append(col.encode(x, state, caches))
+            caches.append(col.encode(x, state, caches))  # type: ignore[operator]  # torch stubs: ModuleList item is Module
         return caches
 
     def score(self, caches: list[dict], actions: torch.Tensor) -> torch.Tensor:
@@ -161,8 +165,9 @@ class QNetwork(nn.Module):
         heads: list[list[torch.Tensor]] = []
         logit = None
         for col, cache in zip(self.columns, caches):
-            logit, acts = col.score(cache, actions, heads)
+            logit, acts = col.score(cache, actions, heads)  # type: ignore[operator]  # torch stubs: ModuleList item is Module
             heads.append(acts)
+        assert logit is not None  # a network has at least one column
         return logit
 
     def forward(self, image: torch.Tensor, state: torch.Tensor, action: torch.Tensor) -> torch.Tensor:

@@ -13,12 +13,13 @@ from __future__ import annotations
 import posixpath
 import re
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import fsspec
 
-from nsl.errors import ConfigError, EnvironmentSetupError, NslError
+from nsl.errors import ConfigError, EnvironmentSetupError, NslError, UnknownReferenceError
 
 from .remotes import Location, json_object
 
@@ -43,18 +44,29 @@ class FsRemote:
         return posixpath.join(self.root, rel) if rel else self.root
 
     def _io(self, what: str, fn, *args: Any) -> Any:
+        """``fn(*args)``; a store's failure becomes a one-line nsl error naming this remote and the fix.
+
+        FileNotFoundError (a missing file) passes through for the caller to handle, unless the
+        bucket itself does not exist.
+        """
         try:
             return fn(*args)
-        except FileNotFoundError:
-            raise
         except NslError:
             raise
-        except PermissionError as e:
-            raise ConfigError(f"{self.url}: permission denied while {what} ({e}); check the store's credentials "
-                              "(fsspec configuration, e.g. AWS_PROFILE)") from None
-        except OSError as e:
-            raise ConfigError(f"{self.url}: {what} failed ({type(e).__name__}: {e}); check the URL and the "
-                              "store's configuration, then run the command again") from None
+        except FileNotFoundError as e:
+            if not self.local and _missing_bucket(e):
+                raise self._missing_bucket(what) from None
+            raise
+        except Exception as e:  # noqa: BLE001 - classified below; anything not from the store is re-raised
+            error = remote_error(self.url, what, e)
+            if error is None:
+                raise
+            raise error from None
+
+    def _missing_bucket(self, what: str) -> UnknownReferenceError:
+        bucket = self.root.split("/", 1)[0]
+        return UnknownReferenceError(f"remote {self.url}: bucket {bucket!r} does not exist (while {what}); check the "
+                                     "URL, or create the bucket and push to it")
 
     def read_bytes(self, rel: str) -> bytes | None:
         """A small file's bytes, or None when it does not exist."""
@@ -113,3 +125,85 @@ class FsRemote:
             self._io(f"uploading {rel}", self.fs.put_file, str(source), dst)
         if self.local:
             self._io(f"renaming {rel} into place", self.fs.mv, tmp, target)
+
+
+# ----------------------------------------------------------------- errors
+# Exceptions of these libraries come from the store (its client, its HTTP stack); others are bugs and keep
+# their traceback.
+_STORE_MODULES = ("botocore", "aiobotocore", "boto3", "s3fs", "aiohttp", "urllib3", "requests", "gcsfs", "google",
+                  "adlfs", "azure", "fsspec", "ssl", "socket")
+_NO_CREDENTIALS = ("NoCredentialsError", "PartialCredentialsError", "CredentialRetrievalError",
+                   "UnauthorizedSSOTokenError", "SSOTokenLoadError", "NoAuthTokenError", "DefaultCredentialsError",
+                   "ClientAuthenticationError")
+_UNREACHABLE = ("EndpointConnectionError", "ConnectTimeoutError", "ReadTimeoutError", "ConnectionClosedError",
+                "ProxyConnectionError", "SSLError", "ClientConnectorError", "ServerDisconnectedError",
+                "ServerTimeoutError", "ClientOSError", "ServiceRequestError")
+
+
+def _names(e: BaseException) -> set[str]:
+    return {c.__name__ for c in type(e).__mro__}
+
+
+def _chain(e: BaseException) -> Iterator[BaseException]:
+    """``e`` and the exceptions it was raised from or while handling."""
+    seen = set()
+    x: BaseException | None = e
+    while x is not None and id(x) not in seen:
+        seen.add(id(x))
+        yield x
+        x = x.__cause__ or x.__context__
+
+
+def _code(e: BaseException) -> str | None:
+    """An S3-style error code (``AccessDenied``, ``NoSuchBucket``, ...) anywhere in ``e``'s chain."""
+    for x in _chain(e):
+        response = getattr(x, "response", None)
+        if isinstance(response, dict):
+            code = (response.get("Error") or {}).get("Code")
+            if code:
+                return str(code)
+    return None
+
+
+def _missing_bucket(e: FileNotFoundError) -> bool:
+    return _code(e) == "NoSuchBucket" or "bucket does not exist" in str(e).lower()
+
+
+def _first_line(e: BaseException) -> str:
+    text = str(e).strip()
+    return text.splitlines()[0] if text else type(e).__name__
+
+
+def _credentials_hint(url: str) -> str:
+    if url.startswith(("s3://", "s3a://")):
+        return ("set AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY, or AWS_PROFILE with a profile in "
+                "~/.aws/credentials")
+    return "configure the store's credentials (fsspec's configuration, or the store's usual place)"
+
+
+def remote_error(url: str, what: str, e: BaseException) -> NslError | None:
+    """The one-line nsl error for a store's failure ``e`` while doing ``what`` on remote ``url``.
+
+    None when ``e`` is not a store's failure (a bug), which the caller re-raises as it is.
+    """
+    names = set().union(*(_names(x) for x in _chain(e)))
+    detail = f"{type(e).__name__}: {_first_line(e)}"
+    if names & set(_NO_CREDENTIALS):
+        return EnvironmentSetupError(f"remote {url}: no credentials for the store (while {what}: {detail}); "
+                                     f"{_credentials_hint(url)}, then run the command again")
+    if isinstance(e, PermissionError) or _code(e) in ("AccessDenied", "InvalidAccessKeyId", "SignatureDoesNotMatch",
+                                                      "ExpiredToken", "AllAccessDisabled"):
+        if url.startswith("file://"):
+            return ConfigError(f"remote {url}: permission denied while {what} ({_first_line(e)}); check the "
+                               "folder's permissions")
+        return ConfigError(f"remote {url}: permission denied while {what} ({_first_line(e)}); use credentials "
+                           f"this remote grants access to ({_credentials_hint(url)}), or ask its owner for access")
+    if names & set(_UNREACHABLE) or any(isinstance(x, (ConnectionError, TimeoutError)) for x in _chain(e)):
+        return EnvironmentSetupError(f"remote {url}: cannot reach the store while {what} ({detail}); check the "
+                                     "network and the store's endpoint (for S3: AWS_ENDPOINT_URL or fsspec's "
+                                     "s3 client_kwargs.endpoint_url), then run the command again")
+    from_store = any(type(x).__module__.split(".")[0] in _STORE_MODULES for x in _chain(e))
+    if isinstance(e, OSError) or from_store:
+        return ConfigError(f"remote {url}: {what} failed ({detail}); check the URL and the store's configuration, "
+                           "then run the command again")
+    return None

@@ -100,13 +100,3 @@ def _hub(text: str, revision: str | None) -> Location:
     url = f"{HUB_SCHEME}{'datasets/' if repo_type == 'dataset' else ''}{repo_id}"
     return Location(url, revision, repo_id, repo_type)
 
-
-def open_remote(loc: Location):
-    """The transport for ``loc``: a :class:`~.hub.HubRemote` or an :class:`~.fsremote.FsRemote`."""
-    if loc.is_hub:
-        from .hub import HubRemote
-
-        return HubRemote(loc)
-    from .fsremote import FsRemote
-
-    return FsRemote(loc)

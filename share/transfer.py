@@ -36,7 +36,8 @@ from typing import Any
 
 from nsl.errors import ConfigError, CorruptDataError, UnknownReferenceError
 
-from .remotes import Location, open_remote, parse_remote
+from .remotes import Location, parse_remote
+from .transports import open_remote
 
 MANIFEST = "manifest.json"
 CARD = "README.md"

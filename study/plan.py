@@ -50,7 +50,8 @@ class BaseDataset:
 class BaseData:
     source: str = "checkpoint"  # "checkpoint": the base checkpoint's own pre-training data, hash-checked; "plan": datasets below
     datasets: tuple[BaseDataset, ...] = ()  # recipes (source "checkpoint": to collect a missing recorded dataset again)
-    verify: bool = True  # source "checkpoint": the data must have the hashes the checkpoint records
+    verify: bool = True  # the data must have the hashes the base checkpoint records for it (source "plan": the
+    # datasets whose name and size the checkpoint records, e.g. the scripted data it was pre-trained on)
 
 
 @dataclass(frozen=True)

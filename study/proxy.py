@@ -29,10 +29,9 @@ PROXIES = ("auc", "softopc")
 def proxy_scores(checkpoint_path: str | Path, view) -> dict[str, float]:
     """``{"auc", "softopc"}`` of a checkpoint's Q-function on a dataset view ({} without successes and failures)."""
     from nsl.learners import load_policy
+    from nsl.services.scoring import offline_scorer
 
-    from .actions import _offline_scorer
-
-    return dict(_offline_scorer(view)(load_policy(str(checkpoint_path))))
+    return dict(offline_scorer(view, gamma=0.0, td=False)(load_policy(str(checkpoint_path))))
 
 
 class ProxyCache:
@@ -69,12 +68,12 @@ def target_view(data: str, episodes: int):
 
 def _candidates(cat, refs: Sequence[str]):
     """The checkpoints named, or the newest checkpoint of every catalogued name (and the shipped base)."""
-    from .actions import _resolve
+    from nsl.services.refs import resolve_init
 
     if refs:
         return [cat.resolve_checkpoint(r) for r in refs]
     out = {}
-    base = _resolve().resolve_init(cat, "ckpt:base")
+    base = resolve_init(cat, "ckpt:base")
     out[base.id] = base
     for name in dict.fromkeys(c.name for c in cat.checkpoints()):
         entry = cat.resolve_checkpoint(f"ckpt:{name}@latest")

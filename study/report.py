@@ -568,7 +568,7 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
              f"per shift (seed {c['seed']}); evaluations on {plan['eval']['episodes']} test-object scenes per cell "
              f"(scene seed {plan['eval']['seed']}, paired across checkpoints); base-task data: "
              f"{plan['base_data']['source']}"
-             + ("" if plan['base_data'].get('verify', True) or plan['base_data']['source'] != 'checkpoint'
+             + ("" if plan['base_data'].get('verify', True)
                 else " (**hashes not checked**: base_data.verify = false)") + ".", "",
              f"Units done: {done} of {len(units)}; time spent in units: {seconds / 60:.1f} minutes.",
              "Every 'study' figure is the real-robot result of the source study (Never Stop Learning, Tables 5.1-5.3); ours are "

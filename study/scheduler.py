@@ -128,7 +128,7 @@ def run_graph(graph: nx.DiGraph, status_path: Path, *, execute: Callable[[Unit, 
               is_done: Callable[[Unit], bool], workers: int = 1, progress: bool = True,
               meta: dict[str, Any] | None = None) -> dict[str, Any]:
     """Run every unit not yet done; returns the final status record.  Raises UnitFailed if a unit fails."""
-    from tqdm import tqdm
+    from nsl.progress import progress_bar
 
     if workers < 1:
         raise NslError(f"--workers {workers} must be at least 1")
@@ -142,7 +142,7 @@ def run_graph(graph: nx.DiGraph, status_path: Path, *, execute: Callable[[Unit, 
     status.save()
     cpus = os.cpu_count() or 1
     inner = max(1, cpus // workers)
-    bar = tqdm(total=len(names), initial=len(done), unit="unit", desc="study", disable=not progress,
+    bar = progress_bar(total=len(names), initial=len(done), unit="unit", desc="study", disable=not progress,
                dynamic_ncols=True, position=0)
     failed: list[str] = []
     running: dict[str, tuple[Any, float]] = {}

@@ -8,7 +8,7 @@ import inspect
 import pytest
 
 from nsl.cli import build_parser
-from nsl.commands import collect, eval as eval_command, train
+from nsl.commands import train
 from nsl.commands._options import rename_old_options
 
 # dest -> the one option string that may carry it
@@ -71,15 +71,56 @@ def test_closed_sets_match_the_libraries():
     assert set(train.METHODS) == set(METHODS) and set(train.CRITERIA) == set(CRITERIA)
 
 
-@pytest.mark.parametrize("command, function", [("collect", collect.collect), ("train", train.train),
-                                               ("eval", eval_command.evaluate)])
-def test_functions_take_the_command_defaults(command, function):
-    parser = dict(PARSERS)[(command,)]
-    params = inspect.signature(function).parameters
+CONFIGURED = [(p, parser) for p, parser in PARSERS if parser.get_default("config") is not None]
+
+
+def test_the_commands_that_run_an_action_name_its_config():
+    assert {" ".join(p) for p, _ in CONFIGURED} >= {"collect", "train", "eval", "continual", "efficiency"}
+
+
+@pytest.mark.parametrize("path, parser", CONFIGURED, ids=[" ".join(p) for p, _ in CONFIGURED])
+def test_no_option_default_disagrees_with_its_config(path, parser):
+    """Every option that fills a config field defaults to the field's default and says the field's help."""
+    from dataclasses import MISSING, fields
+
+    config = parser.get_default("config")
+    by_name = {f.name: f for f in fields(config)}
+    checked = 0
     for a in _visible(parser):
-        if a.dest in params and params[a.dest].default is not inspect.Parameter.empty:
-            assert params[a.dest].default == a.default or (a.default == [] and params[a.dest].default == ()), \
-                f"{command}(): {a.dest} defaults to {params[a.dest].default!r}, the option to {a.default!r}"
+        f = by_name.get(a.dest)
+        if f is None:
+            continue
+        checked += 1
+        label = f"nsl {' '.join(path)} {'/'.join(a.option_strings)}"
+        if a.required or isinstance(a, argparse._AppendAction):
+            assert a.default is None, f"{label}: a required or repeated option has no default of its own"
+        else:
+            assert f.default is not MISSING and a.default == f.default, \
+                f"{label} defaults to {a.default!r}, {config.__name__}.{f.name} to {f.default!r}"
+        assert a.help.replace("%%", "%") == f.metadata["help"], f"{label}: help differs from {config.__name__}'s"
+    assert checked >= len(by_name) - 1, f"nsl {' '.join(path)} fills few fields of {config.__name__}"
+
+
+def test_changing_a_config_default_changes_the_help(monkeypatch, capsys):
+    from nsl.services.options import EvaluateOptions, TrainOptions
+
+    monkeypatch.setattr(TrainOptions.__dataclass_fields__["batch_size"], "default", 96)
+    monkeypatch.setattr(EvaluateOptions.__dataclass_fields__["seed"], "default", 4242)
+    for argv, text in ((["train", "--help"], "(default: 96)"), (["eval", "--help"], "(default: 4242)")):
+        with pytest.raises(SystemExit):
+            build_parser().parse_args(argv)
+        out = capsys.readouterr().out
+        assert text in " ".join(out.split()), argv
+
+
+def test_the_scene_seeds_are_named_and_distinct():
+    import nsl
+    from nsl.eval import EarlyStopConfig, EvalConfig
+
+    seeds = (nsl.EVAL_SCENES, nsl.SELECTION_SCENES, nsl.REPORTING_SCENES, nsl.FINAL_REPORTING_SCENES)
+    assert len(set(seeds)) == 4
+    assert EarlyStopConfig().seed == nsl.SELECTION_SCENES and EvalConfig().seed == nsl.EVAL_SCENES
+    assert build_parser().parse_args(["train", "--data", "d", "--name", "n"]).eval_scenes == nsl.SELECTION_SCENES
 
 
 def test_renamed_options_still_work_and_say_the_new_name(capsys):

@@ -3,8 +3,11 @@
 * The five folders import only the shared core (``nsl/*.py`` but the CLI) and
   themselves; ``eval/`` may also import ``collectors/``.
 * The core imports none of the folders and nothing of the CLI.
-* ``curriculum/`` (``nsl.curriculum``, graph maths on a transfer matrix) imports only the core and itself:
-  none of the five folders, the wiring (``nsl.study``, ``nsl.share``, ``nsl.cluster``) or the CLI.
+* The layers above them import only what is below (:data:`LAYERS`): ``nsl.curriculum`` and
+  ``nsl.share`` the core alone, ``nsl.cluster`` the collectors; ``nsl.services`` (one function per
+  user action) the folders, share, cluster and curriculum; ``nsl.study`` the services too; the public
+  ``nsl.api`` the study too.  None of them imports the command line.
+* Nothing outside the command line imports ``nsl.commands`` (scripts included).
 * Every third-party package the code imports is declared in pyproject.toml.
 """
 
@@ -24,7 +27,17 @@ FOLDERS = ("collectors", "datasets", "learners", "eval", "catalog")
 ALLOWED_FOLDERS = {"eval": {"collectors"}}
 CLI = ("nsl.cli", "nsl.__main__", "nsl.commands", "nsl.bench")
 CORE = sorted(f"nsl.{p.stem}" for p in (ROOT / "nsl").glob("*.py")
-              if p.stem not in ("__init__", "__main__", "cli"))
+              if p.stem not in ("__init__", "__main__", "cli", "api"))
+_FIVE = {f"nsl.{f}" for f in FOLDERS}
+# package -> the nsl packages it may import besides the core and itself
+LAYERS = {
+    "curriculum": set(),
+    "share": set(),
+    "cluster": {"nsl.collectors"},
+    "services": _FIVE | {"nsl.share", "nsl.cluster", "nsl.curriculum"},
+    "study": _FIVE | {"nsl.services", "nsl.share", "nsl.cluster", "nsl.curriculum"},
+}
+API_ALLOWED = _FIVE | {"nsl.services", "nsl.study", "nsl.share", "nsl.cluster", "nsl.curriculum"}
 
 
 def _modules(folder: Path, package: str) -> list[tuple[str, Path]]:
@@ -66,8 +79,7 @@ def _nsl_targets(names: list[str]) -> set[str]:
 
 
 FOLDER_MODULES = [(f, m, p) for f in FOLDERS for m, p in _modules(ROOT / f, f"nsl.{f}")]
-STANDALONE = ("curriculum",)  # packages that stand on the core alone
-STANDALONE_MODULES = [(f, m, p) for f in STANDALONE for m, p in _modules(ROOT / f, f"nsl.{f}")]
+LAYER_MODULES = [(f, m, p) for f in LAYERS for m, p in _modules(ROOT / f, f"nsl.{f}")]
 CORE_MODULES = [("nsl", ROOT / "nsl" / "__init__.py")] + [(m, ROOT / "nsl" / f"{m.split('.')[1]}.py") for m in CORE]
 
 
@@ -83,15 +95,47 @@ def test_folders_import_only_the_core(folder, module, path):
     assert not bad, f"{path.relative_to(ROOT)} imports {bad}; a folder may import only {sorted(allowed)}"
 
 
-@pytest.mark.parametrize("package, module, path", STANDALONE_MODULES, ids=[m for _, m, _ in STANDALONE_MODULES])
-def test_standalone_packages_import_only_the_core(package, module, path):
-    allowed = _core_names() | {f"nsl.{package}"}
+@pytest.mark.parametrize("package, module, path", LAYER_MODULES, ids=[m for _, m, _ in LAYER_MODULES])
+def test_each_layer_imports_only_what_is_below_it(package, module, path):
+    allowed = _core_names() | {f"nsl.{package}"} | LAYERS[package]
     bad = sorted(t for t in _nsl_targets(_imports(module, path)) if t not in allowed)
     assert not bad, f"{path.relative_to(ROOT)} imports {bad}; nsl.{package} may import only {sorted(allowed)}"
 
 
-def test_standalone_packages_are_checked():
-    assert {m for _, m, _ in STANDALONE_MODULES} >= {"nsl.curriculum", "nsl.curriculum.tree"}
+def test_every_layer_is_checked():
+    found = {m for _, m, _ in LAYER_MODULES}
+    assert {"nsl.curriculum.tree", "nsl.services.train", "nsl.study.actions", "nsl.share.transfer",
+            "nsl.cluster.executor"} <= found
+    assert all((ROOT / f).is_dir() for f in LAYERS)
+
+
+def test_the_api_imports_no_command_line():
+    path = ROOT / "nsl" / "api.py"
+    bad = sorted(t for t in _nsl_targets(_imports("nsl.api", path))
+                 if t not in _core_names() | API_ALLOWED | {"nsl.api"})
+    assert not bad, f"nsl/api.py imports {bad}; the API sits below the command line"
+
+
+def _product_files():
+    """Every Python file outside the command line and the tests: the folders, the layers, the core, scripts."""
+    for folder in (*FOLDERS, *LAYERS, "scripts"):
+        yield from sorted((ROOT / folder).rglob("*.py"))
+    yield from (ROOT / "nsl" / f"{m.split('.')[1]}.py" for m in (*CORE, "nsl.api"))
+
+
+def test_nothing_outside_the_command_line_imports_it():
+    offenders = []
+    for path in _product_files():
+        names = _imports("x.y", path)
+        if any(n == "nsl.commands" or n.startswith(("nsl.commands.", "nsl.cli", "nsl.bench")) for n in names):
+            offenders.append(str(path.relative_to(ROOT)))
+    assert offenders == [], f"{offenders} import the command line; call nsl's API or nsl.services instead"
+
+
+def test_the_checker_finds_an_upward_import(tmp_path):
+    sample = tmp_path / "mod.py"
+    sample.write_text("def f():\n    from nsl.commands.train import run\n    import nsl.api\n")
+    assert _nsl_targets(_imports("nsl.study.mod", sample)) == {"nsl.commands", "nsl.api"}
 
 
 @pytest.mark.parametrize("module, path", CORE_MODULES, ids=[m for m, _ in CORE_MODULES])
@@ -123,7 +167,7 @@ def test_every_imported_package_is_declared():
     declared = {_normal(re.split(r"[<>=!~;\[ ]", d, maxsplit=1)[0]) for d in specs}
     dists = packages_distributions()
     missing = {}
-    for folder in ("nsl", *FOLDERS, *STANDALONE, "scripts"):
+    for folder in ("nsl", *FOLDERS, *LAYERS, "scripts"):
         for path in sorted((ROOT / folder).rglob("*.py")):
             for name in _imports("x.y", path):
                 top = name.split(".")[0]

@@ -65,3 +65,45 @@ def add_seed(p, default: int = 0, help: str = "seed") -> None:
 def add_env_batch_size(p, default: int) -> None:
     p.add_argument("--batch-size", type=int, default=default,
                    help="environments per worker stepping in lock-step; the policy acts on them as one batch")
+
+
+def add_field(p, config: type, name: str, *flags: str, **overrides) -> argparse.Action:
+    """An option whose default, help text, choices and metavar come from field ``name`` of dataclass ``config``.
+
+    The config is the one source of the default (``nsl.services.options``); ``overrides`` add argparse keywords
+    (``type``, ``required``, ``action``, ...).  A bool field becomes a ``store_true`` flag.
+    """
+    from dataclasses import MISSING, fields
+
+    field = next((f for f in fields(config) if f.name == name), None)
+    if field is None:
+        raise AttributeError(f"{config.__name__} has no field {name!r}")
+    meta = dict(field.metadata)
+    kwargs = {"dest": name, "help": (meta.get("help") or "").replace("%", "%%") or None}
+    default = field.default if field.default is not MISSING else None
+    if "choices" in meta:
+        kwargs["choices"] = meta["choices"]
+    if "metavar" in meta:
+        kwargs["metavar"] = meta["metavar"]
+    if isinstance(default, bool):
+        kwargs["action"] = "store_true"
+    elif "action" not in overrides:
+        kind = overrides.pop("type", None) or _type_of(field.type, default)
+        if kind is not None:
+            kwargs["type"] = kind
+    kwargs["default"] = default
+    kwargs.update(overrides)
+    if kwargs.get("required") or kwargs.get("action") == "append":
+        kwargs["default"] = None  # a list option starts empty; the caller turns it into the field's tuple
+    return p.add_argument(*(flags or ("--" + name.replace("_", "-"),)), **kwargs)
+
+
+def _type_of(annotation, default):
+    """The argparse type of a field: from its default's type, else from its annotation's first name."""
+    if isinstance(default, (int, float, str)) and not isinstance(default, bool):
+        return type(default)
+    text = annotation if isinstance(annotation, str) else getattr(annotation, "__name__", "")
+    for name, kind in (("int", int), ("float", float), ("str", str)):
+        if text.split("|")[0].strip() == name:
+            return kind
+    return None

@@ -299,11 +299,11 @@ def run_verify(args: argparse.Namespace) -> int:
 
 
 def run_suggest_base(args: argparse.Namespace) -> int:
-    from nsl.commands.curriculum import matrix_path
+    from nsl.services.refs import transfer_matrix
     from nsl.curriculum import Correlation, load_matrix
     from nsl.study import suggest_base
 
-    matrix = load_matrix(matrix_path(args.matrix, args.transfer)) if (args.matrix or args.transfer) else None
+    matrix = load_matrix(transfer_matrix(args.matrix, args.transfer)) if (args.matrix or args.transfer) else None
     ranked, data = suggest_base(args.shift, args.data, episodes=args.episodes, matrix=matrix,
                                 checkpoints=args.checkpoint, proxy=args.proxy,
                                 progress=sys.stderr.isatty() and not args.json)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from nsl.commands._options import add_json, add_parser
 
@@ -25,31 +24,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def matrix_path(matrix: str | None, transfer: str | None) -> Path:
-    """The matrix.json named by --matrix or --transfer."""
-    if matrix:
-        return Path(matrix)
-    from nsl import workspace
-    from nsl.errors import UnknownReferenceError
-
-    path = workspace.home() / "transfers" / transfer / "matrix.json"
-    if not path.is_file():
-        raise UnknownReferenceError(f"transfer {transfer!r} has no matrix in {workspace.home()}; run "
-                                    f"`nsl transfer run PLAN` (or `nsl transfer report {transfer}`) first")
-    return path
-
-
 def run(args: argparse.Namespace) -> int:
     import json
 
-    from nsl.curriculum import build_curriculum, load_matrix, plot_curriculum
+    import nsl
 
-    path = matrix_path(args.matrix, args.transfer)
-    curriculum = build_curriculum(load_matrix(path), args.tasks or None)
-    picture = plot_curriculum(curriculum, Path(args.out) if args.out else path.parent / "curriculum.png")
+    result = nsl.build_curriculum(matrix=args.matrix, transfer=args.transfer, tasks=args.tasks or None, out=args.out)
     if args.json:
-        print(json.dumps({**curriculum.to_dict(), "matrix": str(path), "picture": str(picture)}, sort_keys=True))
+        print(json.dumps({**result.trees.to_dict(), "matrix": str(result.matrix), "picture": str(result.picture)},
+                         sort_keys=True))
         return 0
-    print("\n".join(curriculum.lines()))
-    print(f"picture: {picture}")
+    print("\n".join(result.trees.lines()))
+    print(f"picture: {result.picture}")
     return 0

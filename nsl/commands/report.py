@@ -21,13 +21,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from nsl import workspace
-    from nsl.eval import write_report
+    import nsl
 
-    path = Path(args.run)
-    if not path.is_dir() and (workspace.runs_dir() / args.run).is_dir():
-        path = workspace.runs_dir() / args.run
-    result = write_report(path, args.out, title=args.title)
+    result = nsl.report(args.run, out=args.out, title=args.title)
     print(f"wrote {result.markdown}")
     for fig in result.figures:
         print(f"  {fig}")

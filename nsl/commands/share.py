@@ -1,16 +1,14 @@
 """``nsl push REF DEST`` and ``nsl pull SRC``: share dataset versions and checkpoints, hash-verified.
 
 The transfer (manifests, skipping, verification, resuming) is ``nsl.share``;
-these commands resolve references with the datasets code and the catalog,
-write the cards, and register what a pull brings in with its origin.
+``nsl.push`` and ``nsl.pull`` (``nsl.services.share``) resolve references,
+write the cards, and register what a pull brings in with its origin.  These
+commands parse and print.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
-import shutil
-from pathlib import Path
 
 REMOTES = """\
 remotes:
@@ -48,168 +46,21 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 # ------------------------------------------------------------------- push
 def run_push(args: argparse.Namespace) -> int:
-    from nsl.errors import ConfigError
+    import nsl
 
-    ref = args.ref.strip()
-    if ref.startswith("data:"):
-        result, what = _push_dataset(ref, args.dest)
-    elif ref.startswith("ckpt:"):
-        result, what = _push_checkpoint(ref, args.dest)
-    else:
-        raise ConfigError(f"push reference {ref!r} needs a prefix: data:NAME@vN for a dataset version or "
-                          "ckpt:NAME@STEP for a checkpoint")
+    result = nsl.push(args.ref, args.dest)
     tags = f", tags {', '.join(result.tags)}" if result.tags else ""
     sent = f"uploaded {len(result.uploaded)} file(s)" if result.uploaded else "uploaded nothing (already there)"
-    print(f"pushed {what} to {result.url} (revision {result.revision}{tags}): {sent}, "
+    print(f"pushed {result.what} to {result.url} (revision {result.revision}{tags}): {sent}, "
           f"{len(result.unchanged)} unchanged")
     return 0
 
 
-def _push_dataset(ref: str, dest: str):
-    from nsl.datasets import api
-    from nsl.errors import ConfigError
-    from nsl.share import dataset_card, push_dataset
-
-    view = api.open_view(ref)
-    v = view.version
-    if view.num_episodes != v.num_episodes:
-        raise ConfigError(f"{ref} is a tier; push whole versions (data:{v.ref}), or write the tier as its own "
-                          f"dataset with `nsl dataset export {ref} --out DIR`")
-    api.verify(v.ref)  # publish only what still matches its manifest
-    spec = v.provenance["collections"][-1]["spec"]
-    env = spec.get("env", {})
-    card = dataset_card(name=v.name, version=v.version, content_hash=v.hash, episodes=v.num_episodes,
-                        frames=v.num_frames, success_rate=view.success_rate, shift=str(env.get("shift", "base")),
-                        policy=str(spec.get("policy_ref", "?")), env_version=str(env.get("env_version", "?")),
-                        codebase_version=api.layout.CODEBASE_VERSION, provenance=v.provenance)
-    return push_dataset(v.root, name=v.name, version=v.version, dest=dest, card=card), f"data:{v.ref}"
-
-
-def _push_checkpoint(ref: str, dest: str):
-    from nsl.catalog import Catalog, folder_checkpoint_id, published_lineage, render_model_card
-    from nsl.errors import CorruptDataError, UnknownReferenceError
-    from nsl.commands._refs import resolve_init
-    from nsl.share import push_checkpoint
-
-    with Catalog() as cat:
-        entry = resolve_init(cat, ref)
-        if folder_checkpoint_id(Path(entry.path)) != entry.id:
-            raise CorruptDataError(f"checkpoint {entry.path} no longer matches its catalog id {entry.short_id}; "
-                                   "run `nsl catalog verify` and restore it before pushing")
-        datasets = {}
-        for u in entry.data:
-            try:
-                datasets[(u.dataset, u.version)] = cat.dataset(u.dataset, u.version)
-            except UnknownReferenceError:
-                pass
-        published = published_lineage(cat, entry)
-        card = render_model_card(entry, cat.lineage(entry.id)[1:], datasets, cat.evaluations(entry.id),
-                                 {"published": published})
-    checkpoint = {"id": entry.id, "name": entry.name, "step": entry.step, "shift": entry.shift,
-                  "code_version": entry.code_version}
-    result = push_checkpoint(Path(entry.path), dest=dest, card=card, checkpoint=checkpoint, lineage=published)
-    return result, f"ckpt:{entry.ref} ({entry.short_id})"
-
-
 # ------------------------------------------------------------------- pull
 def run_pull(args: argparse.Namespace) -> int:
-    from nsl import workspace
-    from nsl.catalog import Catalog
-    from nsl.share import pull
+    import nsl
 
-    pulled = pull(args.src, workspace.cache_dir() / "pull")
-    with Catalog() as cat:
-        if pulled.kind == "dataset":
-            what = _place_dataset(cat, pulled, args.as_name)
-        else:
-            what = _place_checkpoint(cat, pulled, args.as_name)
-    shutil.rmtree(pulled.folder, ignore_errors=True)  # gone already when it was moved into place
-    print(f"pulled {pulled.url} (revision {pulled.revision}) as {what}: {len(pulled.downloaded)} file(s) "
-          f"downloaded, {len(pulled.reused)} already verified")
+    result = nsl.pull(args.src, as_name=args.as_name)
+    print(f"pulled {result.url} (revision {result.revision}) as {result.what}: {len(result.downloaded)} file(s) "
+          f"downloaded, {len(result.reused)} already verified")
     return 0
-
-
-def _place_dataset(cat, pulled, as_name: str | None) -> str:
-    from nsl.catalog import record_origin
-    from nsl.datasets import api
-    from nsl.datasets.versions import hash_of
-    from nsl.errors import ConfigError, CorruptDataError
-    from nsl.commands._refs import register_dataset
-
-    m = pulled.manifest
-    if hash_of(m["files"]) != m["hash"]:
-        raise CorruptDataError(f"{pulled.url}: manifest.json records hash {m['hash']} that does not match its "
-                               "file list; the remote is damaged, ask for it to be pushed again")
-    name = api.parse_ref(as_name or pulled.location.name).name
-    staged = api.DatasetVersion(name, pulled.version, pulled.folder)
-    staged.episodes  # noqa: B018  # the metadata must agree with info.json before anything is placed
-    target = api.dataset_root(name) / api.layout.VERSION_DIR.format(version=pulled.version)
-    if target.exists():
-        here = api.open_version(f"{name}@v{pulled.version}")
-        if here.hash != m["hash"]:
-            raise ConfigError(f"dataset {name}@v{pulled.version} already exists here with hash {here.hash}, the "
-                              f"pulled one is {m['hash']}; pull it under another name with --as NAME")
-    else:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        os.rename(pulled.folder, target)
-    version = api.open_version(f"{name}@v{pulled.version}")
-    register_dataset(cat, version)
-    record_origin(cat, "dataset", version.ref, hash=version.hash, url=pulled.url, revision=pulled.revision,
-                  published={"name": pulled.location.name, "version": pulled.version,
-                             "requested": str(pulled.location)})
-    return f"data:{version.ref} ({version.hash})"
-
-
-def _place_checkpoint(cat, pulled, as_name: str | None) -> str:
-    from nsl import workspace
-    from nsl.catalog import DataUse, folder_checkpoint_id, record_origin
-    from nsl.errors import ConfigError, CorruptDataError, UnknownReferenceError
-    from nsl.learners import load_checkpoint
-
-    m = pulled.manifest
-    ck, lineage = m["checkpoint"], list(m.get("lineage") or [])
-    cid = folder_checkpoint_id(pulled.folder)
-    if cid != ck.get("id"):
-        raise CorruptDataError(f"{pulled.url}: the pulled files make checkpoint id {cid[:12]}, the manifest says "
-                               f"{str(ck.get('id'))[:12]}; the remote is inconsistent, ask for it to be pushed again")
-    load_checkpoint(pulled.folder)  # its config and weights must load before it is registered
-    origin = {"hash": cid, "url": pulled.url, "revision": pulled.revision,
-              "published": {"checkpoint": ck, "lineage": lineage, "requested": str(pulled.location)}}
-    try:
-        entry = cat.checkpoint(cid)
-    except UnknownReferenceError:
-        entry = None
-    if entry is not None:  # the same weights and config are here already (pulled before, or made here)
-        record_origin(cat, "checkpoint", cid, **origin)
-        return f"ckpt:{entry.ref} ({entry.short_id}, already in the catalog)"
-    name = as_name or str(ck.get("name"))
-    step = int(ck.get("step", 0))
-    node = lineage[0] if lineage and lineage[0].get("id") == cid else {}
-    parent = node.get("parent")
-    if parent:
-        try:
-            parent = cat.checkpoint(parent).id
-        except UnknownReferenceError:
-            parent = None  # not in this workspace: the published lineage records it
-    uses = []
-    for d in node.get("data", []):
-        try:
-            if cat.dataset(d["dataset"], d["version"]).hash == d.get("hash"):
-                uses.append(DataUse(d["dataset"], d["version"], d["weight"], d.get("tier")))
-        except UnknownReferenceError:
-            pass
-    dest = workspace.checkpoints_dir() / name / f"{step:08d}-{cid[:12]}"
-    if dest.exists():
-        raise ConfigError(f"{dest} exists but is not in the catalog; move it away or run `nsl catalog gc`")
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    os.rename(pulled.folder, dest)
-    try:
-        entry = cat.register_checkpoint(dest, name=name, step=step, parent=parent, data=uses,
-                                        shift=ck.get("shift") or node.get("shift"),
-                                        card_info={"summary": f"Pulled from {pulled.url} (revision "
-                                                              f"{pulled.revision}).", "published": lineage})
-    except BaseException:
-        os.rename(dest, pulled.folder)  # back to staging: nothing half-registered stays in the workspace
-        raise
-    record_origin(cat, "checkpoint", cid, **origin)
-    return f"ckpt:{entry.ref} ({entry.short_id})"

@@ -19,7 +19,7 @@ import argparse
 import json
 from pathlib import Path
 
-from nsl.commands.eval import evaluate
+import nsl
 from nsl.study.reference import STUDY_DROPS
 
 GRID = {
@@ -56,9 +56,9 @@ def main() -> None:
         grid = {k: args.severities for k in grid}
 
     specs = ["base"] + [f"{name}@{s:g}" for name, g in grid.items() for s in g]
-    res = evaluate([args.checkpoint], shift=",".join(specs), episodes=args.episodes, seed=args.seed,
-                   workers=args.workers, source="calibration", progress=False)
-    table = {str(k): v for k, v in res["table"][args.checkpoint].items()}
+    res = nsl.evaluate(args.checkpoint, shift=",".join(specs), episodes=args.episodes, seed=args.seed,
+                       workers=args.workers, source="calibration", progress=False)
+    table = {str(k): v for k, v in res.table[args.checkpoint].items()}
     rate = {spec: table[spec].success_rate for spec in table}
     base = next(r for spec, r in rate.items() if spec in ("base", ""))
     out = {"checkpoint": args.checkpoint, "episodes": args.episodes, "seed": args.seed, "base": base, "shifts": {}}

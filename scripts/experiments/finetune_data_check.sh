@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Which data fine-tunes the shipped base (docs/experiments.md, "Plasticity of a base"): the demo's fine-tune of
-# ckpt:base (900 steps at 25% of its rate, Monte-Carlo returns as the base was trained; evaluated at steps 300 / 600
+# Which data fine-tunes the shipped base (docs/experiments/plasticity.md, "Plasticity of a base"): the demo's fine-tune
+# of ckpt:base (900 steps at 25% of its rate, Monte-Carlo returns as the base was trained; evaluated at steps 300 / 600
 # / 900 on 100 reporting scenes of the target shift and of the base task) with two kinds of data:
 #
 #   own-small  600 base-task and 200 harsh-lighting episodes, both collected by ckpt:base with 10% random actions

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # One fine-tuning recipe for every shift: the study's protocol against conservative variants, on the five
-# shifts at the severities the `full` study plan calibrated (docs/experiments.md, "One recipe for all shifts").
+# shifts at the severities the `full` study plan calibrated (docs/experiments/open-questions.md: not yet run).
 # Runs in a workspace that holds a finished `nsl study run full` (its 800-episode collections by the base and
 # the base's re-collected pre-training data). Each recipe fine-tunes ckpt:base for 1,000 steps (as the plan),
 # 50/50 with the base data, on each shift's 800 episodes; every checkpoint (the study's own protocol runs too)

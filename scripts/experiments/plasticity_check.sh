@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Measures how far the demo's fine-tuning moves a base checkpoint on harsh lighting (reported in
-# docs/experiments.md, "Plasticity of a base"). For each checkpoint ref given, it runs the demo's step-5 fine-tune
-# (demo-base=0.5 + demo-harsh=0.5, 900 steps at 25% of the parent's rate) without stopping early,
+# docs/experiments/plasticity.md, "Plasticity of a base"). For each checkpoint ref given, it runs the demo's step-5
+# fine-tune (demo-base=0.5 + demo-harsh=0.5, 900 steps at 25% of the parent's rate) without stopping early,
 # then evaluates the parent and steps 300 / 600 / 900 on 100 test scenes (seed 2000) of harsh
 # lighting and of the base task. About 2 minutes per checkpoint on 2 cores; outputs go to
 # $NSL_HOME; a finished fine-tune is not repeated.

@@ -1,6 +1,6 @@
 """Why a fine-tune does or does not move a base: Q-function measurements before and after fine-tuning.
 
-Reported in docs/experiments.md, "Why fine-tuning fails on some shifts: a diagnosis".  For every checkpoint
+Reported in docs/experiments/plasticity.md, "Why fine-tuning fails on some shifts: a diagnosis".  For every checkpoint
 given and every dataset given, on (up to ``--transitions``) transitions of the dataset, without augmentation:
 
 * ``logits``: the logit of Q(s, a) for the data's actions, and ``max_logits`` for CEM's best action (what the
@@ -72,19 +72,13 @@ def load_transitions(ref: str, limit: int, seed: int, gamma: float) -> dict:
     and the Monte-Carlo discounted return of each."""
     view = api.open_view(ref)
     a = view.episodes_arrays()
-    ep = a[keys.EPISODE_INDEX]
-    n = len(ep)
-    reward = a[keys.REWARD].astype(np.float64)
-    done = a[keys.DONE].astype(bool)
-    following = np.zeros(n, dtype=bool)
-    following[:-1] = ep[1:] == ep[:-1]  # frame i + 1 is frame i's next observation
-    success_of = {e: bool(a[keys.SUCCESS][ep == e].any()) for e in np.unique(ep)}
-    success = np.array([success_of[e] for e in ep])
-    ret = np.zeros(n)
-    for i in range(n - 1, -1, -1):  # G_t = r_t + gamma G_{t+1} within an episode
-        ret[i] = reward[i] + (gamma * ret[i + 1] if following[i] and not done[i] else 0.0)
-    first = np.r_[True, ep[1:] != ep[:-1]]
-    usable = np.flatnonzero(done | following)  # a truncated episode's last frame has no known target
+    labels = api.frame_labels(a, gamma=gamma)  # episode success, next-frame masks and Monte-Carlo returns
+    ep, n = labels.episode, len(labels.episode)
+    reward, done, following, success, ret = labels.reward, labels.done, labels.following, labels.success, \
+        labels.mc_return
+    success_of = labels.episode_success
+    first = labels.first
+    usable = np.flatnonzero(labels.known)  # a truncated episode's last frame has no known target
     rng = np.random.default_rng(seed)
     pick = np.sort(rng.choice(usable, size=min(limit, len(usable)), replace=False))
     nxt = np.where(following[pick], pick + 1, pick)

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The fine-tunes and measurements of docs/experiments.md, "Why fine-tuning fails on some shifts: a diagnosis".
+# The fine-tunes and measurements of docs/experiments/plasticity.md, "Why fine-tuning fails on some shifts: a
+# diagnosis".
 # The study's protocol from ckpt:base (800 target episodes collected by the base with epsilon 0.1; 1500 steps
 # mixed 50/50 with the base's pre-training data), its control without target data, and the remedies tried on
 # offset_gripper@0.25; each evaluated on 200 selection scenes (seed 3000, test objects) of its shift and of the

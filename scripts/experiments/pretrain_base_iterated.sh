@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Reproduces the pre-training recipe that reaches the 80% target (reported in docs/experiments.md, "Data: rounds
+# Reproduces the pre-training recipe that reaches the 80% target (reported in docs/experiments/rounds.md, "Data: rounds
 # of learned-policy data"): 82.3% [79.8-84.5] on 1,000 reporting scenes for the selected seed, 80.4% on average over three
 # seeds. 10,000 collected episodes: 8,000 scripted, then
 # 667 + 667 episodes from two policies trained on the scripted data, then 666 from a policy trained on all of
@@ -40,5 +40,6 @@ for seed in 0 1; do
     --name c1-final-h256$([ $seed = 0 ] || echo -seed$seed)
 done
 
-# Selection on 1,000 scenes of seed 3000 (80.5 / 81.2% here: seed 1 selected); docs/experiments.md reports seed 2000.
+# Selection on 1,000 scenes of seed 3000 (80.5 / 81.2% here: seed 1 selected); docs/experiments/rounds.md reports
+# seed 2000.
 $NSL eval --checkpoint ckpt:c1-final-h256@6000,ckpt:c1-final-h256-seed1@6000 --episodes 1000 --workers 2 --seed 3000

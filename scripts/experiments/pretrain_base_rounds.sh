@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A base trained on more rounds of learned-policy data, within the larger budget of 50,000 base-task episodes and
-# 2.5 hours of collection and training (docs/experiments.md, "More and larger rounds"). It extends the 80% recipe
+# 2.5 hours of collection and training (docs/experiments/rounds.md, "More and larger rounds"). It extends the 80% recipe
 # (pretrain_base_iterated.sh: 10,000 episodes, rounds of 667) to rounds of thousands of episodes:
 #
 #   round 0   the 8,000 scripted episodes; Monte-Carlo QT-Opt on them                     -> rounds-r0

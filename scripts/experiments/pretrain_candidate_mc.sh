@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Reproduces the Monte-Carlo base candidate (reported in docs/experiments.md, "The Monte-Carlo candidate"): 74% on
-# the reporting scenes against the shipped base's 70%, but it fine-tunes to harsh lighting far more slowly.
+# Reproduces the Monte-Carlo base candidate (reported in docs/experiments/pretraining.md, "The Monte-Carlo candidate"):
+# 74% on the reporting scenes against the shipped base's 70%, but it fine-tunes to harsh lighting far more slowly.
 # About 8 minutes of collection and 35 minutes of training on 2 cores; outputs go to $NSL_HOME, and
 # every step resumes when run again. The four stage-2 seeds are compared on the selection scenes at the end.
 set -euo pipefail

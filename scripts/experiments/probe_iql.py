@@ -1,5 +1,5 @@
-"""A research probe behind docs/experiments.md, "Where the fine-tunes plateau": the study's fine-tune with implicit
-Q-learning's targets (Kostrikov et al. 2022) instead of QT-Opt's, to test whether a learner that bootstraps only
+"""A research probe behind docs/experiments/plateau.md, "Where the fine-tunes plateau": the study's fine-tune with
+implicit Q-learning's targets (Kostrikov et al. 2022) instead of QT-Opt's, to test whether a learner that bootstraps only
 through actions the data took improves more than one step over the policy that collected the target data.
 
 From a parent checkpoint, on the given data mix (one-step transitions):

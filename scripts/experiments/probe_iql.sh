@@ -2,7 +2,7 @@
 # The study's fine-tune with implicit Q-learning's targets (probe_iql.py) on the recipe's data: the base's 44,000
 # pre-training episodes as the base half and the 800 episodes the base collected in each shift, 1,000 steps after
 # a 300-step V warm-up; each result scored on the 400 selection scenes (seed 3000) of the shift and of the base task,
-# as protocol_mc_finetune.sh's variants are (docs/experiments.md, "Where the fine-tunes plateau"). Results go to
+# as protocol_mc_finetune.sh's variants are (docs/experiments/plateau.md, "Where the fine-tunes plateau"). Results go to
 # $NSL_HOME/protocol-iql/SHIFT-tauTAU.txt; about 3 minutes per shift and expectile on 2 cores.
 #
 #   NSL_HOME=<pretrain_base_rounds.sh's workspace> [TAUS="0.8"] [SHIFTS="harsh_lighting@2 offset_gripper@0.25"] \

@@ -1,4 +1,4 @@
-"""Research probes behind numbers in docs/experiments.md that no `nsl` command gives ("Acting with other
+"""Research probes behind numbers in docs/experiments/ that no `nsl` command gives ("Acting with other
 CEM settings, Polyak weights and ensembles", "Plasticity of a base", "Ranking recipes on 1,000 scenes"): a
 checkpoint acting with other CEM settings, its Polyak-averaged weights, and CEM over the mean Q of several
 checkpoints. Each prints the success on test scenes of one shift (default: the base task); episode i uses scene

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The study's protocol with early stopping chosen on selection scenes (docs/experiments.md, "Early stopping from
+# The study's protocol with early stopping chosen on selection scenes (docs/experiments/plateau.md, "Early stopping from
 # the shipped base"). The fine-tunes are protocol_reporting.sh's (the one recipe, seeds 0 / 1 / 2, the base's 44,000
 # pre-training episodes as the base half), run again with an evaluation every 250 steps on 200 selection scenes
 # (--eval-scenes 3000) of the shift and of the base task; patience 4 lets every run reach step 1,000. Two rules pick a

@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # The study's protocol on the rounds base (scripts/experiments/protocol_rounds.toml) with one change to the
 # fine-tune: Monte-Carlo returns and the base's own crop (--n-step 8 --crop 2), as the base was trained, instead of
-# nsl train's one-step default (docs/experiments.md, "Fine-tuning the rounds base"). Same data (the 800 episodes the
-# study plan's run collected per shift, the base's 44,000 pre-training episodes at half their recorded weights),
-# same steps and rate; each fine-tune is evaluated on 200 selection scenes (seed 3000) of its shift and of the base
-# task. Runs in the workspace of pretrain_base_rounds.sh after `nsl study run scripts/experiments/protocol_rounds.toml`.
-# About 1.5 minutes per shift on 2 cores; evaluation records go to $NSL_HOME/protocol-mc/*.json.
+# nsl train's one-step default (docs/experiments/fine-tuning.md, "Fine-tuning the rounds base"). Same data (the 800
+# episodes the study plan's run collected per shift, the base's 44,000 pre-training episodes at half their recorded
+# weights), same steps and rate; each fine-tune is evaluated on 200 selection scenes (seed 3000) of its shift and of the
+# base task. Runs in the workspace of pretrain_base_rounds.sh after `nsl study run
+# scripts/experiments/protocol_rounds.toml`. About 1.5 minutes per shift on 2 cores; evaluation records go to
+# $NSL_HOME/protocol-mc/*.json.
 #
 #   bash scripts/experiments/protocol_mc_finetune.sh [NAME OPTION...]
 #

@@ -3,7 +3,7 @@
 # fine-tunes of protocol_mc_finetune.sh (the one recipe: 800 episodes the base collected, 1,000 steps at 25% of
 # its rate, --n-step 8 --crop 2, half of every batch from its 44,000 pre-training episodes at their recorded
 # weights), three fine-tune seeds per shift, scored on the `full` study's 200 reporting scenes (seed 2000) of the
-# shift and of the base task, with the base itself on the same scenes (docs/experiments.md, "The protocol with
+# shift and of the base task, with the base itself on the same scenes (docs/experiments/plateau.md, "The protocol with
 # the base's own data"). The target data is the `full` study's: the same content hashes. Seed 0 is
 # protocol_mc_finetune.sh's default variant (mcft; mcft4 for harsh lighting@2), seeds 1 and 2 its variants mcs1
 # and mcs2, trained first (each also scored on 400 selection scenes, as protocol_mc_finetune.sh does). Records

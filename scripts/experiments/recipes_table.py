@@ -3,7 +3,7 @@ and on the base task, against the base checkpoint, from the evaluation records i
 
 For each recipe row: success on the shift it was fine-tuned on (gain over the base checkpoint in points), the base
 task after that fine-tune, the average gain over the shifts, and how many fine-tunes keep the base task within 10
-points of the base checkpoint's own (the base-policy issue's bar) or at it (the study's "reached the base's own
+points of the base checkpoint's own (the base-policy bar) or at it (the study's "reached the base's own
 success").  Every cell is one fine-tune (seed 0) on 200 selection scenes (seed 3000).
 
     python scripts/experiments/recipes_table.py $NSL_HOME/recipes

@@ -3,7 +3,7 @@
 # (pretrain_base_rounds.sh: Monte-Carlo returns, 6,000 steps, rate cosine-decayed, the wider head), on the same
 # batch a fine-tune sees: half the base's 44,000 pre-training episodes at their recorded weights, half the 800
 # episodes the base collected in the shift (protocol_mc_finetune.sh's data). If it scores no better on the shift
-# than the fine-tune, the data, not the base's plasticity, caps the fine-tune (docs/experiments.md, "Where the
+# than the fine-tune, the data, not the base's plasticity, caps the fine-tune (docs/experiments/plateau.md, "Where the
 # fine-tunes plateau"). Each run is evaluated on EPISODES (default 400) selection scenes (seed 3000) of its shift and
 # of the base task; records go to $NSL_HOME/protocol-scratch/SHIFT.json. About 6 minutes per shift on 2 cores.
 #

@@ -4,8 +4,9 @@
 # in the shift with 10% random actions, as the base did (protocol-round2-SHIFT, seed 6); then the base is fine-tuned
 # again with the recipe on both target sets (0.25 each, the base half unchanged) and scored on the same 400 selection
 # scenes (seed 3000) of the shift and of the base task. Outside the study's protocol, which lets only the base
-# collect: it tests whether the target data's own policy, not the learner, sets the plateau (docs/experiments.md,
-# "Where the fine-tunes plateau"). Records go to $NSL_HOME/protocol-round2/; about 2.5 minutes per shift.
+# collect: it tests whether the target data's own policy, not the learner, sets the plateau
+# (docs/experiments/plateau.md, "Where the fine-tunes plateau"). Records go to $NSL_HOME/protocol-round2/; about 2.5
+# minutes per shift.
 #
 #   NSL_HOME=<pretrain_base_rounds.sh's workspace> [SHIFTS="harsh_lighting@2 offset_gripper@0.25"] [VARIANT=mcft4] \
 #       bash scripts/experiments/second_round.sh

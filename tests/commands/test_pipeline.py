@@ -95,7 +95,7 @@ def test_continual_rejects_bad_sequences_before_any_work(pipeline):
 
 
 def test_continual_resumes_at_the_interrupted_stage(pipeline, monkeypatch, capsys):
-    import nsl.commands.continual as continual
+    import nsl.services.continual as continual
 
     args = ["continual", "--sequence", "checkerboard_backing,extend_gripper,offset_gripper", "--init",
             "ckpt:base-tiny", "--base-data", "grasp-base", "--episodes", "4", "--steps", "4", "--eval-episodes", "2",
@@ -103,11 +103,11 @@ def test_continual_resumes_at_the_interrupted_stage(pipeline, monkeypatch, capsy
     real_stage = continual._stage
     calls: list[int] = []
 
-    def stage_then_interrupt(run, i, shift, policy, cfg):
+    def stage_then_interrupt(run, i, shift, policy, cfg, progress):
         if i == 3:
             raise KeyboardInterrupt  # the user presses Ctrl-C during stage 3
         calls.append(i)
-        return real_stage(run, i, shift, policy, cfg)
+        return real_stage(run, i, shift, policy, cfg, progress)
 
     monkeypatch.setattr(continual, "_stage", stage_then_interrupt)
     assert run_cli(*args) == 130
@@ -279,10 +279,10 @@ def test_efficiency_writes_tiers_json_that_the_report_reads(pipeline, capsys):
 
 
 def test_continual_reports_a_stage_error_once_and_debug_shows_it(pipeline, monkeypatch, capsys):
-    import nsl.commands.collect as collect_command
+    import nsl.services.collect as collect_command
 
-    def failing_collect(**kwargs):
-        raise ConfigError(f"collection of {kwargs['data']} refused")
+    def failing_collect(config, **kwargs):
+        raise ConfigError(f"collection of {config.data} refused")
 
     monkeypatch.setattr(collect_command, "collect", failing_collect)
     args = ["continual", "--sequence", "harsh_lighting", "--init", "ckpt:base-tiny", "--base-data", "grasp-base",

@@ -1,4 +1,4 @@
-"""scripts/experiments/plasticity_diagnose.py, the measurements behind docs/experiments.md's diagnosis of
+"""scripts/experiments/plasticity_diagnose.py, the measurements behind docs/experiments/plasticity.md's diagnosis of
 fine-tuning: run on a tiny pre-trained checkpoint and a short fine-tune of it, on small real datasets."""
 
 from __future__ import annotations

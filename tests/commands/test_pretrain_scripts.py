@@ -1,4 +1,4 @@
-"""The pre-training recipe behind the 80% result (docs/experiments.md) keeps to the project's data budget: it
+"""The pre-training recipe behind the 80% result (docs/experiments/rounds.md) keeps to the project's data budget: it
 collects at most 10,000 episodes in all, and its final training reads every collected episode and nothing else."""
 
 from __future__ import annotations

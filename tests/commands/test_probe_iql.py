@@ -1,4 +1,4 @@
-"""scripts/experiments/probe_iql.py, the implicit Q-learning probe behind a row of docs/experiments.md: the warm-up
+"""scripts/experiments/probe_iql.py, the implicit Q-learning probe behind a row of docs/experiments/plateau.md: the warm-up
 fits V alone and leaves the parent's Q untouched; then Q trains, and the result is a checkpoint that acts."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""scripts/experiments/probe_policies.py, the research probes behind numbers in docs/experiments.md: an ensemble
+"""scripts/experiments/probe_policies.py, the research probes behind numbers in docs/experiments/: an ensemble
 of one network repeated acts exactly like that network's own CEM policy, and the Polyak probe names what it needs."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The protocol scripts behind docs/experiments.md's fine-tuning tables run the commands they say: three seeds of
+"""The protocol scripts behind the fine-tuning tables of docs/experiments/ run the commands they say: three seeds of
 one recipe on each of the five study shifts, each scored on the reporting scenes of its shift and of the base task,
 and the base task after every fine-tune on 1,000 scenes in one paired evaluation with the base."""
 

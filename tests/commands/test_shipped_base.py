@@ -44,10 +44,16 @@ def test_ship_script_copies_a_runs_checkpoint_and_recipe(tmp_path):
     assert run_cli("collect", "--shift", "base", "--episodes", "4", "--policy", "oracle", "--data", "tiny-base",
                    "--batch-size", "4") == 0
     assert run_cli("train", "--data", "tiny-base", "--steps", "2", "--checkpoint-every", "2", "--name", "tiny") == 0
+    from tests.test_ship_base import CLEAN, _set_code_version
+
+    home = Path(os.environ["NSL_HOME"])  # as if committed code made them: a dirty tree's runs are refused
+    _set_code_version(home / "runs" / "tiny" / "checkpoints" / "step-000000002" / "config.json", CLEAN, "code_version")
+    _set_code_version(home / "runs" / "tiny" / "command.json", CLEAN, "code_version")
+    _set_code_version(home / "datasets" / "tiny-base" / "v1" / "manifest.json", CLEAN, "created", "code_version")
     dest = tmp_path / "asset"
     script = README.parent / "scripts" / "experiments" / "ship_base.py"
     subprocess.run([sys.executable, str(script), "tiny", "2", str(dest)], check=True, capture_output=True)
-    run = Path(os.environ["NSL_HOME"]) / "runs" / "tiny"
+    run = home / "runs" / "tiny"
     step = run / "checkpoints" / "step-000000002"
     assert (dest / "model.safetensors").read_bytes() == (step / "model.safetensors").read_bytes()
     assert json.loads((dest / "command.json").read_text()) == json.loads((run / "command.json").read_text())

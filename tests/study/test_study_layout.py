@@ -1,4 +1,4 @@
-"""nsl.study is a wiring layer: the five folders never import it, and it reaches nsl.commands._refs in one module only."""
+"""nsl.study is a wiring layer: the five folders never import it, and it never reaches the command line."""
 
 from __future__ import annotations
 
@@ -16,6 +16,8 @@ def test_the_five_folders_never_import_the_study():
     assert offenders == []
 
 
-def test_reference_glue_is_imported_by_the_adapter_only():
-    users = sorted(p.name for p in (ROOT / "study").glob("*.py") if "nsl.commands._refs" in p.read_text())
-    assert users == ["actions.py"]
+def test_the_study_calls_the_services_not_the_commands():
+    users = sorted(p.name for p in (ROOT / "study").glob("*.py") if "nsl.commands" in p.read_text())
+    assert users == []
+    services = sorted(p.name for p in (ROOT / "study").glob("*.py") if "nsl.services" in p.read_text())
+    assert "actions.py" in services

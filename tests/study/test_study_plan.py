@@ -103,3 +103,47 @@ def test_shipped_plans_parse_and_build_a_graph(name):
     if name in ("full", "paper"):
         assert plan.collect.episodes == 800 and plan.finetune.tiers == (25, 50, 100, 200, 400, 800)
         assert len(plan.shifts) == 5 and len(plan.continual.sequence) == 5
+
+
+def _plan_with_base_data(name: str, episodes: int, verify: bool = True):
+    from nsl.study.plan import parse_plan
+
+    return parse_plan({"name": "verify", "base": "ckpt:base", "shifts": ["harsh_lighting"],
+                       "base_data": {"source": "plan", "verify": verify,
+                                     "datasets": [{"name": name, "policy": "oracle:0.5", "seed": 1,
+                                                   "episodes": episodes}]}})
+
+
+def test_plan_base_data_the_base_records_must_reproduce_its_hash(tmp_path, monkeypatch):
+    """The scripted data the shipped base was trained on is collected again by the plan and hash-checked."""
+    import json
+    from pathlib import Path
+
+    from nsl.catalog import Catalog
+    from nsl.errors import CorruptDataError
+    from nsl.services.collect import CollectConfig, collect
+    from nsl.study.actions import base_sources
+
+    monkeypatch.setenv("NSL_HOME", str(tmp_path))
+    with Catalog() as cat:
+        base = Path(cat.resolve_checkpoint("ckpt:base").path)
+    recorded = {s["ref"].split("@")[0]: s for s in json.loads((base / "config.json").read_text())["data"]["sources"]}
+    oracle = recorded["grasp-base-oracle"]
+    (src,) = base_sources(_plan_with_base_data("grasp-base-oracle", oracle["episodes"]))
+    assert src.hash == oracle["version_hash"]  # the collect unit must reproduce it
+    (src,) = base_sources(_plan_with_base_data("grasp-base-oracle", oracle["episodes"], verify=False))
+    assert src.hash is None
+    (src,) = base_sources(_plan_with_base_data("tiny-base-oracle", 16))  # data the base never saw: nothing to check
+    assert src.hash is None
+    # the workspace holds other data under the recorded name: refused before any work, in one line
+    collect(CollectConfig(shift="base", episodes=2, policy="oracle:0.5", data="grasp-base-oracle", seed=1),
+            progress=False)
+    with pytest.raises(CorruptDataError, match="no version with the hash ckpt:base records") as err:
+        base_sources(_plan_with_base_data("grasp-base-oracle", oracle["episodes"]))
+    assert "\n" not in str(err.value)
+
+
+def test_the_shipped_plans_verify_their_base_data():
+    from nsl.study.plan import SHIPPED, load_plan
+
+    assert all(load_plan(name).base_data.verify for name in SHIPPED)

@@ -87,7 +87,8 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
     assert [r["step"] for r in records["curves"]["ft"]["0"]] == [0, 5, 10]
     es = _table(text, "## Overfitting and early stopping")
     assert [r[0] for r in es] == ["best point (oracle)", "last step (no stopping)", "eval", "softopc", "auc", "td"]
-    assert es[-1][1] == "no choice"  # this learner records no TD error yet: reported, not a crash
+    # the study's curves run `nsl train`'s own scorer, so the TD criterion chooses a step like the others
+    assert es[-1][1] != "no choice" and any(ch.isdigit() for ch in es[-1][1]), es
     # findings (a)-(e), each with a verdict, in the report and recomputed from the records
     verdicts = {f.key: f.verdict for f in findings(records)}
     assert set(verdicts) == set("abcde")
@@ -121,8 +122,9 @@ def test_kill_9_then_rerun_gives_the_uninterrupted_numbers(mini_run, mini_plan, 
     env = {**os.environ, "NSL_HOME": str(home), "PYTHONPATH": str(ROOT), "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
     cmd = [sys.executable, "-m", "nsl", "study", "run", str(mini_plan), "--quiet"]
     n_units = len(json.loads((mini_run / "studies" / "mini" / "units.json").read_text())["units"])
-    kill_after = random.Random().randint(2, n_units - 2)  # a random point: this many units done before the kill
-    print(f"killing after {kill_after} units")
+    seed = int(os.environ.get("NSL_KILL_SEED", "0"))  # NSL_KILL_SEED=k tries another point, reproducibly
+    kill_after = random.Random(seed).randint(2, n_units - 2)  # this many units done before the kill
+    print(f"killing after {kill_after} units (NSL_KILL_SEED={seed})")
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, process_group=0, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     status_file = home / "studies" / "mini" / "status.json"

@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from tqdm.auto import tqdm
+from nsl.progress import progress_bar
 
 from nsl.errors import ConfigError
 from nsl.workspace import atomic_write_bytes
@@ -83,7 +83,7 @@ def inherited_settings(init_checkpoint: str | Path) -> dict[str, Any]:
     """The parent's training settings a fine-tune keeps unless told otherwise: its n-step horizon and crop.
 
     A parent trained on Monte-Carlo-like returns (``n_step`` 8) and fine-tuned on one-step targets changes
-    what its Q-values mean in the first steps of the fine-tune; measured in docs/experiments.md.
+    what its Q-values mean in the first steps of the fine-tune; measured in docs/experiments/fine-tuning.md.
     """
     training = read_config(Path(init_checkpoint))["training"]
     defaults = TrainConfig()
@@ -110,8 +110,13 @@ def initial_network(method: str, parent: Checkpoint | None, net: NetConfig | Non
     """The network a run starts from (random parts drawn from ``seed``)."""
     torch.manual_seed(seed)
     if method == "scratch":
-        cfg = net or NetConfig.from_dict({**parent.architecture.to_dict(), "columns": 1})
-        return QNetwork(cfg)
+        if net is None:
+            if parent is None:
+                raise ConfigError("a network from scratch needs an architecture (net) or a parent checkpoint")
+            net = NetConfig.from_dict({**parent.architecture.to_dict(), "columns": 1})
+        return QNetwork(net)
+    if parent is None:
+        raise ConfigError(f"method {method!r} fine-tunes a parent; pass its checkpoint")
     base = copy.deepcopy(parent.net).train()
     if method == "ft":
         return base
@@ -159,7 +164,7 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
     # on where the workspace is (a dataset collected by this checkpoint records that id).
     parent_info = None if parent is None else {"id": checkpoint_id(parent.path), "step": parent.step,
                                                "method": parent.config["method"]}
-    run = {"training": resolved.to_dict(), "method": method, "parent": parent_info,
+    run: dict[str, Any] = {"training": resolved.to_dict(), "method": method, "parent": parent_info,
            "architecture": model.cfg.to_dict(), "data": data}
     _check_same_run(out, run)
 
@@ -169,6 +174,7 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
     resume = _latest_trainer_state(out)
     if resume is not None:
         state = load_trainer_state(resume)
+        assert state is not None  # resume is a folder with a trainer state file
         learner.load_state_dict(state["learner"])
         rng.bit_generator.state = state["numpy_rng"]
         torch.set_rng_state(state["torch_rng"])
@@ -188,7 +194,7 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
     window: dict[str, float] = {}
     last_row: dict[str, float] = {}
     t0, n0 = time.perf_counter(), 0
-    bar = tqdm(total=config.steps, initial=step, unit="step", disable=not progress, dynamic_ncols=True,
+    bar = progress_bar(total=config.steps, initial=step, unit="step", disable=not progress, dynamic_ncols=True,
                desc=f"train {method}")
     try:
         if eval_fn is not None and config.eval_every and step == 0:
@@ -213,7 +219,7 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
                                 target=f"{last_row['q/target_mean']:.3f}")
                 window, t0, n0 = {}, time.perf_counter(), 0
             evaluated = eval_fn is not None and config.eval_every and step % config.eval_every == 0
-            if evaluated:
+            if evaluated and eval_fn is not None:
                 stop = _evaluate(eval_fn, learner, resolved, step, out, log, evals)
             if step % config.checkpoint_every == 0 or step == config.steps or stop or evaluated:
                 _save_periodic(out, learner, rng, step, ckpt_config(step), config.keep_trainer_state)

@@ -62,3 +62,40 @@ def register_dataset(cat, version) -> None:
 def resolve_init(cat, ref: str):
     """A parent checkpoint from the catalog (``ckpt:base`` falls back to the one shipped with nsl)."""
     return cat.resolve_checkpoint(ref)
+
+
+def transfer_matrix(matrix=None, transfer: str | None = None):
+    """The matrix.json named by a path (``matrix``) or by a transfer's name (its ``$NSL_HOME/transfers/NAME/``)."""
+    from pathlib import Path
+
+    if matrix is not None:
+        return Path(matrix)
+    from nsl import workspace
+    from nsl.errors import UnknownReferenceError
+
+    path = workspace.home() / "transfers" / str(transfer) / "matrix.json"
+    if not path.is_file():
+        raise UnknownReferenceError(f"transfer {transfer!r} has no matrix in {workspace.home()}; run "
+                                    f"`nsl transfer run PLAN` (or `nsl transfer report {transfer}`) first")
+    return path
+
+
+def open_run(name: str, config):
+    """The run folder ``$NSL_HOME/runs/NAME`` of a pipeline, holding ``config`` (a dataclass) as config.json.
+
+    A run of that name with another configuration is refused, so running the same call again resumes it.
+    """
+    import json
+    from dataclasses import asdict
+
+    from nsl import workspace
+    from nsl.errors import ConfigError
+
+    run_dir = workspace.runs_dir() / name
+    run_dir.mkdir(parents=True, exist_ok=True)
+    path = run_dir / "config.json"
+    if path.exists() and json.loads(path.read_text()) != json.loads(json.dumps(asdict(config))):
+        raise ConfigError(f"run {name!r} exists with a different configuration ({path}); "
+                          "use another --name or the same options to resume")
+    workspace.atomic_write_json(path, asdict(config))
+    return run_dir
