@@ -29,24 +29,69 @@ learner.  The folder is a leaf: it imports no other nsl folder.
 """
 
 from .folders import (
-    CARD_FILE, CONFIG_FILE, WEIGHTS_FILE, checkpoint_id, folder_checkpoint_id, folder_digests, write_model_folder,
-)
-from .origins import Origin, origin_of, published_lineage, record_origin
-from .maintenance import GcItem, Problem, VerifyReport, gc_apply, gc_plan, remove, verify
-from .records import (
-    CheckpointEntry, CheckpointRef, DataRef, DatasetEntry, DataUse, EvaluationEntry, ResolvedData,
-    parse_checkpoint_ref, parse_data_ref, short_hash, wilson_interval,
+    CARD_FILE,
+    CONFIG_FILE,
+    WEIGHTS_FILE,
+    checkpoint_id,
+    folder_checkpoint_id,
+    folder_digests,
+    write_model_folder,
 )
 from .lineage import format_descendants, format_lineage
+from .maintenance import GcItem, Problem, VerifyReport, gc_apply, gc_plan, remove, verify
+from .origins import Origin, origin_of, published_lineage, record_origin
+from .records import (
+    CheckpointEntry,
+    CheckpointRef,
+    DataRef,
+    DatasetEntry,
+    DataUse,
+    EvaluationEntry,
+    ResolvedData,
+    parse_checkpoint_ref,
+    parse_data_ref,
+    short_hash,
+    wilson_interval,
+)
 from .render import render_model_card
 from .schema import MIGRATIONS, SCHEMA_VERSION
 from .store import Catalog, best_checkpoint
 
 __all__ = [
-    "CARD_FILE", "CONFIG_FILE", "WEIGHTS_FILE", "Catalog", "CheckpointEntry", "CheckpointRef", "DataRef",
-    "DataUse", "DatasetEntry", "EvaluationEntry", "GcItem", "MIGRATIONS", "Origin", "Problem", "ResolvedData",
-    "SCHEMA_VERSION", "VerifyReport", "best_checkpoint", "checkpoint_id", "folder_checkpoint_id", "folder_digests",
-    "format_descendants", "format_lineage", "gc_apply", "gc_plan", "origin_of", "parse_checkpoint_ref",
-    "parse_data_ref", "published_lineage", "record_origin", "remove", "render_model_card", "short_hash", "verify",
-    "wilson_interval", "write_model_folder",
+    "CARD_FILE",
+    "CONFIG_FILE",
+    "WEIGHTS_FILE",
+    "Catalog",
+    "CheckpointEntry",
+    "CheckpointRef",
+    "DataRef",
+    "DataUse",
+    "DatasetEntry",
+    "EvaluationEntry",
+    "GcItem",
+    "MIGRATIONS",
+    "Origin",
+    "Problem",
+    "ResolvedData",
+    "SCHEMA_VERSION",
+    "VerifyReport",
+    "best_checkpoint",
+    "checkpoint_id",
+    "folder_checkpoint_id",
+    "folder_digests",
+    "format_descendants",
+    "format_lineage",
+    "gc_apply",
+    "gc_plan",
+    "origin_of",
+    "parse_checkpoint_ref",
+    "parse_data_ref",
+    "published_lineage",
+    "record_origin",
+    "remove",
+    "render_model_card",
+    "short_hash",
+    "verify",
+    "wilson_interval",
+    "write_model_folder",
 ]

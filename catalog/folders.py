@@ -21,8 +21,20 @@ from pathlib import Path
 from typing import Any
 
 from nsl.checkpoint_format import (  # noqa: F401  (re-exported for nsl.catalog's users)
-    CARD_FILE, CONFIG_FILE, CONTENT_FILES, TMP_PREFIX, WEIGHTS_FILE, check_safetensors, checkpoint_id, encode_config,
-    file_sha256, folder_checkpoint_id, folder_digests, is_temp_name, read_config, write_folder,
+    CARD_FILE,
+    CONFIG_FILE,
+    CONTENT_FILES,
+    TMP_PREFIX,
+    WEIGHTS_FILE,
+    check_safetensors,
+    checkpoint_id,
+    encode_config,
+    file_sha256,
+    folder_checkpoint_id,
+    folder_digests,
+    is_temp_name,
+    read_config,
+    write_folder,
 )
 from nsl.errors import ConfigError, CorruptDataError
 from nsl.workspace import atomic_write_bytes
@@ -81,8 +93,10 @@ def write_model_folder(dest: Path, weights: bytes | Path, config: Mapping[str, A
     if not write_folder(dest, {WEIGHTS_FILE: weights, CONFIG_FILE: config_bytes, CARD_FILE: card.encode()}):
         existing = folder_digests(dest) if all((dest / f).is_file() for f in CONTENT_FILES) else {}
         if existing != digests:
-            raise CorruptDataError(f"{dest} already exists with other contents; move it away or run "
-                                   "`nsl catalog gc` if no catalog entry uses it")
+            raise CorruptDataError(
+                f"{dest} already exists with other contents; move it away or run "
+                "`nsl catalog gc` if no catalog entry uses it"
+            )
         write_card(dest, card)
     return digests
 

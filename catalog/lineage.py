@@ -53,13 +53,17 @@ def _published_data_line(cat: Catalog, d: Mapping[str, Any]) -> str:
         pass
     tier = f":{d['tier']}" if d.get("tier") else ""
     what = ", ".join(x for x in (d.get("shift"), f"{d['episodes']} episodes" if "episodes" in d else None) if x)
-    return (f"data: {d['dataset']}@v{d['version']}{tier} ({what + ', ' if what else ''}hash "
-            f"{short_hash(d.get('hash'))}; published, not in this workspace), weight {d['weight']:g}")
+    return (
+        f"data: {d['dataset']}@v{d['version']}{tier} ({what + ', ' if what else ''}hash "
+        f"{short_hash(d.get('hash'))}; published, not in this workspace), weight {d['weight']:g}"
+    )
 
 
 def _eval_text(r: Mapping[str, Any]) -> str:
-    return (f"eval: {r['shift']} ({r['split']} objects) {100 * r['rate']:.1f}% "
-            f"[{100 * r['ci_low']:.1f}, {100 * r['ci_high']:.1f}] over {r['episodes']} episodes")
+    return (
+        f"eval: {r['shift']} ({r['split']} objects) {100 * r['rate']:.1f}% "
+        f"[{100 * r['ci_low']:.1f}, {100 * r['ci_high']:.1f}] over {r['episodes']} episodes"
+    )
 
 
 def _eval_lines(cat: Catalog, c: CheckpointEntry) -> list[str]:
@@ -71,8 +75,10 @@ def _published_tail(cat: Catalog, nodes: Sequence[Mapping[str, Any]], depth: int
     lines = []
     for i, n in enumerate(nodes):
         d = depth + i
-        lines.append(f"{INDENT * (d - 1)}└─ from {n['name']}@{n['step']}  {str(n['id'])[:12]}  trained for "
-                     f"{n['shift']} (published lineage; not in this workspace)")
+        lines.append(
+            f"{INDENT * (d - 1)}└─ from {n['name']}@{n['step']}  {str(n['id'])[:12]}  trained for "
+            f"{n['shift']} (published lineage; not in this workspace)"
+        )
         items = [_published_data_line(cat, x) for x in n.get("data", [])] or ["data: none recorded"]
         if evaluations:
             items += [_eval_text(r) for r in n.get("evaluations", [])]
@@ -115,7 +121,7 @@ def format_lineage(cat: Catalog, ref: str, evaluations: bool = True) -> str:
             if c.parent is None and len(published) > 1:
                 lines += _published_tail(cat, published[1:], depth + 1, evaluations)
                 continue
-            tail = (f"from {c.parent[:12]} (removed from the catalog)" if c.parent else "from scratch (no parent)")
+            tail = f"from {c.parent[:12]} (removed from the catalog)" if c.parent else "from scratch (no parent)"
             lines.append(f"{pad}└─ {tail}")
     return "\n".join(lines)
 

@@ -60,8 +60,9 @@ def checkpoint_dependents(cat: Catalog, entry: CheckpointEntry) -> list[str]:
     out = []
     kids = cat.children(entry.id)
     if kids:
-        out.append(f"{len(kids)} child checkpoint(s) ({', '.join(k.ref for k in kids[:4])}"
-                   f"{', ...' if len(kids) > 4 else ''})")
+        out.append(
+            f"{len(kids)} child checkpoint(s) ({', '.join(k.ref for k in kids[:4])}{', ...' if len(kids) > 4 else ''})"
+        )
     evals = cat.evaluations(entry.id)
     if evals:
         out.append(f"{len(evals)} evaluation(s)")
@@ -84,8 +85,10 @@ def remove(cat: Catalog, ref: str, force: bool = False, delete_files: bool = Tru
 def _remove_checkpoint(cat: Catalog, entry: CheckpointEntry, force: bool, delete_files: bool) -> list[str]:
     deps = checkpoint_dependents(cat, entry)
     if deps and not force:
-        raise ConfigError(f"ckpt:{entry.ref} ({entry.short_id}) has dependents: {'; '.join(deps)}; remove those "
-                          "first, or pass --force (children then show their parent as removed)")
+        raise ConfigError(
+            f"ckpt:{entry.ref} ({entry.short_id}) has dependents: {'; '.join(deps)}; remove those "
+            "first, or pass --force (children then show their parent as removed)"
+        )
     removed = [f"checkpoint {entry.ref} ({entry.short_id})"]
     with cat.write() as c:
         n = c.execute("DELETE FROM evaluations WHERE checkpoint = ?", (entry.id,)).rowcount
@@ -108,8 +111,10 @@ def _remove_dataset(cat: Catalog, entry: DatasetEntry, force: bool, delete_files
     users = cat.trained_on(entry.name, entry.version)
     if users and not force:
         shown = ", ".join(c.ref for c in users[:4]) + (", ..." if len(users) > 4 else "")
-        raise ConfigError(f"data:{entry.ref} was used to train {len(users)} checkpoint(s) ({shown}); remove "
-                          "those first, or pass --force (their lineage then shows the dataset as removed)")
+        raise ConfigError(
+            f"data:{entry.ref} was used to train {len(users)} checkpoint(s) ({shown}); remove "
+            "those first, or pass --force (their lineage then shows the dataset as removed)"
+        )
     with cat.write() as c:
         c.execute("DELETE FROM datasets WHERE name = ? AND version = ?", (entry.name, entry.version))
     removed = [f"dataset {entry.ref}"]
@@ -218,8 +223,9 @@ class VerifyReport:
         return not self.problems
 
 
-def _compare(ref: str, root: Path, recorded: dict[str, str], actual: dict[str, str] | None,
-             allow_extra: bool) -> list[Problem]:
+def _compare(
+    ref: str, root: Path, recorded: dict[str, str], actual: dict[str, str] | None, allow_extra: bool
+) -> list[Problem]:
     if not root.exists():
         return [Problem(ref, str(root), "missing (the whole folder)")]
     out = []
@@ -239,8 +245,9 @@ def _compare(ref: str, root: Path, recorded: dict[str, str], actual: dict[str, s
     return out
 
 
-def verify(cat: Catalog, refs: Sequence[str] = (), dataset_hasher: Callable[[Path], str] | None = None,
-           progress: bool = False) -> VerifyReport:
+def verify(
+    cat: Catalog, refs: Sequence[str] = (), dataset_hasher: Callable[[Path], str] | None = None, progress: bool = False
+) -> VerifyReport:
     """Re-hash the files of the given entries (default: all) against their registration.
 
     Checkpoints: ``model.safetensors`` and ``config.json`` (the files the id
@@ -272,8 +279,9 @@ def verify(cat: Catalog, refs: Sequence[str] = (), dataset_hasher: Callable[[Pat
         else:
             report.datasets += 1
             root = Path(e.path)
-            problems = _compare(f"data:{e.ref}", root, e.files, hash_tree(root) if root.exists() else None,
-                                allow_extra=False)
+            problems = _compare(
+                f"data:{e.ref}", root, e.files, hash_tree(root) if root.exists() else None, allow_extra=False
+            )
             if dataset_hasher is not None and root.exists():
                 try:
                     h = dataset_hasher(root)

@@ -45,20 +45,32 @@ class Origin:
         return list(self.published.get("lineage") or [])
 
 
-def record_origin(cat: Catalog, kind: str, entry: str, *, hash: str, url: str, revision: str,
-                  published: Mapping[str, Any] | None = None) -> Origin:
+def record_origin(
+    cat: Catalog,
+    kind: str,
+    entry: str,
+    *,
+    hash: str,
+    url: str,
+    revision: str,
+    published: Mapping[str, Any] | None = None,
+) -> Origin:
     """Record that ``entry`` was pulled from ``url`` at ``revision``; the same record twice is kept once."""
     if kind not in KINDS:
         raise ConfigError(f"origin kind {kind!r} must be one of {KINDS}")
     if "@" in url.split("://", 1)[-1].split("/", 1)[0]:
         raise ConfigError(f"origin URL {url!r} carries credentials; record the URL without them")
     with cat.write() as c:
-        row = c.execute("SELECT * FROM origins WHERE kind = ? AND entry = ? AND hash = ? AND url = ? AND revision = ?",
-                        (kind, entry, hash, url, revision)).fetchone()
+        row = c.execute(
+            "SELECT * FROM origins WHERE kind = ? AND entry = ? AND hash = ? AND url = ? AND revision = ?",
+            (kind, entry, hash, url, revision),
+        ).fetchone()
         if row is None:
-            c.execute("INSERT INTO origins (kind, entry, hash, url, revision, published, created) "
-                      "VALUES (?, ?, ?, ?, ?, ?, ?)",
-                      (kind, entry, hash, url, revision, dumps(dict(published or {})), utc_now()))
+            c.execute(
+                "INSERT INTO origins (kind, entry, hash, url, revision, published, created) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?)",
+                (kind, entry, hash, url, revision, dumps(dict(published or {})), utc_now()),
+            )
     found = origin_of(cat, kind, entry, hash)
     assert found is not None
     return found
@@ -87,8 +99,17 @@ def _node(cat: Catalog, c: CheckpointEntry) -> dict[str, Any]:
         except UnknownReferenceError:
             pass
         data.append(d)
-    return {"id": c.id, "name": c.name, "step": c.step, "shift": c.shift, "parent": c.parent, "created": c.created,
-            "code_version": c.code_version, "data": data, "evaluations": pooled_results(cat.evaluations(c.id))}
+    return {
+        "id": c.id,
+        "name": c.name,
+        "step": c.step,
+        "shift": c.shift,
+        "parent": c.parent,
+        "created": c.created,
+        "code_version": c.code_version,
+        "data": data,
+        "evaluations": pooled_results(cat.evaluations(c.id)),
+    }
 
 
 def published_lineage(cat: Catalog, entry: CheckpointEntry) -> list[dict[str, Any]]:

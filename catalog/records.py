@@ -26,9 +26,23 @@ from nsl.errors import ConfigError
 from nsl.refs import CKPT_PREFIX, DATA_PREFIX, NAME_RE, DataRef, check_name, parse_data_ref, parse_tier
 from nsl.stats import wilson_interval
 
-__all__ = ["CKPT_PREFIX", "DATA_PREFIX", "CheckpointEntry", "CheckpointRef", "DataRef", "DataUse", "DatasetEntry",
-           "EvaluationEntry", "ResolvedData", "check_name", "dumps", "parse_checkpoint_ref", "parse_data_ref",
-           "short_hash", "wilson_interval"]
+__all__ = [
+    "CKPT_PREFIX",
+    "DATA_PREFIX",
+    "CheckpointEntry",
+    "CheckpointRef",
+    "DataRef",
+    "DataUse",
+    "DatasetEntry",
+    "EvaluationEntry",
+    "ResolvedData",
+    "check_name",
+    "dumps",
+    "parse_checkpoint_ref",
+    "parse_data_ref",
+    "short_hash",
+    "wilson_interval",
+]
 
 HEX_RE = re.compile(r"[0-9a-f]{6,64}")
 RESERVED = ("best", "latest")  # selectors that cannot be tag names
@@ -182,12 +196,13 @@ def parse_checkpoint_ref(text: str) -> CheckpointRef:
         return CheckpointRef(name)
     shift = None
     if selector.startswith("best:"):
-        selector, shift = "best", selector[len("best:"):]
+        selector, shift = "best", selector[len("best:") :]
         if not shift:
             raise ConfigError(f"reference {text!r} has an empty shift after @best:; write e.g. ckpt:{name}@best:base")
     if not (selector.isdigit() or selector in RESERVED or NAME_RE.fullmatch(selector)):
-        raise ConfigError(f"reference {text!r} has an invalid selector {selector!r}; "
-                          "use @STEP, @best, @best:SHIFT, @latest or @TAG")
+        raise ConfigError(
+            f"reference {text!r} has an invalid selector {selector!r}; use @STEP, @best, @best:SHIFT, @latest or @TAG"
+        )
     return CheckpointRef(name, selector, shift)
 
 

@@ -29,7 +29,9 @@ LOCK_RETRIES = 20  # further attempts (with back-off) after a busy timeout expir
 
 def _v1(conn: sqlite3.Connection) -> None:
     """The first schema: datasets, checkpoints, evaluations, tags."""
-    _run_script(conn, """
+    _run_script(
+        conn,
+        """
         CREATE TABLE schema_history (
             version      INTEGER NOT NULL,
             applied      TEXT NOT NULL,
@@ -93,12 +95,15 @@ def _v1(conn: sqlite3.Connection) -> None:
             created    TEXT NOT NULL
         );
         CREATE INDEX tags_tag ON tags (tag, seq);
-    """)
+    """,
+    )
 
 
 def _v2(conn: sqlite3.Connection) -> None:
     """Checkpoint names: an entry may carry several names (a deterministic re-run registered under a new one)."""
-    _run_script(conn, """
+    _run_script(
+        conn,
+        """
         CREATE TABLE checkpoint_names (          -- every name a checkpoint is registered under
             seq        INTEGER PRIMARY KEY AUTOINCREMENT,
             name       TEXT NOT NULL,
@@ -109,7 +114,8 @@ def _v2(conn: sqlite3.Connection) -> None:
         CREATE INDEX checkpoint_names_name ON checkpoint_names (name, seq);
         INSERT INTO checkpoint_names (name, checkpoint, created)
             SELECT name, id, created FROM checkpoints ORDER BY seq
-    """)
+    """,
+    )
 
 
 def _run_script(conn: sqlite3.Connection, script: str) -> None:
@@ -121,7 +127,9 @@ def _run_script(conn: sqlite3.Connection, script: str) -> None:
 
 def _v3(conn: sqlite3.Connection) -> None:
     """Origins: where a pulled dataset version or checkpoint came from, and what was published with it."""
-    _run_script(conn, """
+    _run_script(
+        conn,
+        """
         CREATE TABLE origins (
             seq       INTEGER PRIMARY KEY AUTOINCREMENT,
             kind      TEXT NOT NULL,        -- 'dataset' or 'checkpoint'
@@ -133,7 +141,8 @@ def _v3(conn: sqlite3.Connection) -> None:
             created   TEXT NOT NULL
         );
         CREATE INDEX origins_entry ON origins (kind, entry);
-    """)
+    """,
+    )
 
 
 MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _v1, 2: _v2, 3: _v3}
@@ -162,8 +171,9 @@ def begin_immediate(conn: sqlite3.Connection) -> None:
     _retry(lambda: conn.execute("BEGIN IMMEDIATE"))
 
 
-def connect(path: Path, migrations: Mapping[int, Callable[[sqlite3.Connection], None]] = MIGRATIONS,
-            code_version: str = "") -> sqlite3.Connection:
+def connect(
+    path: Path, migrations: Mapping[int, Callable[[sqlite3.Connection], None]] = MIGRATIONS, code_version: str = ""
+) -> sqlite3.Connection:
     """Open (creating if needed) the catalog at ``path``, upgraded to the newest schema.
 
     ``migrations`` is a parameter so the upgrade path can be exercised with
@@ -183,12 +193,14 @@ def connect(path: Path, migrations: Mapping[int, Callable[[sqlite3.Connection], 
             else:
                 raise CorruptDataError(
                     f"{path} is not an nsl catalog (not an SQLite database: {e}); move it away, "
-                    "or set NSL_HOME to another workspace") from None
+                    "or set NSL_HOME to another workspace"
+                ) from None
         _check_identity(path, app_id, version, tables, target)
         mode = _retry(lambda: conn.execute("PRAGMA journal_mode = WAL").fetchone()[0])
         if str(mode).lower() != "wal":
-            raise CorruptDataError(f"{path}: could not switch the catalog to WAL mode (got {mode!r}); "
-                                   "put NSL_HOME on a local file system")
+            raise CorruptDataError(
+                f"{path}: could not switch the catalog to WAL mode (got {mode!r}); put NSL_HOME on a local file system"
+            )
         if version < target:
             _migrate(conn, path, migrations, target, code_version)
         conn.execute("PRAGMA synchronous = NORMAL")  # safe with WAL: a crash loses no committed row
@@ -217,8 +229,12 @@ def _identify_snapshot(conn: sqlite3.Connection) -> tuple[int, int, list[str]]:
 def _identify(conn: sqlite3.Connection) -> tuple[int, int, list[str]]:
     app_id = conn.execute("PRAGMA application_id").fetchone()[0]
     version = conn.execute("PRAGMA user_version").fetchone()[0]
-    tables = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table' "
-                                         "AND name NOT LIKE 'sqlite_%' ORDER BY name")]
+    tables = [
+        r[0]
+        for r in conn.execute(
+            "SELECT name FROM sqlite_master WHERE type = 'table' AND name NOT LIKE 'sqlite_%' ORDER BY name"
+        )
+    ]
     return app_id, version, tables
 
 
@@ -229,15 +245,22 @@ def _check_identity(path: Path, app_id: int, version: int, tables: list[str], ta
         shown = ", ".join(tables[:6]) + (", ..." if len(tables) > 6 else "")
         raise CorruptDataError(
             f"{path} is not an nsl catalog (an SQLite database with tables: {shown or 'none'}); "
-            "move it away, or set NSL_HOME to another workspace")
+            "move it away, or set NSL_HOME to another workspace"
+        )
     if version > target:
         raise IncompatibleVersionError(
             f"{path} has catalog schema version {version}, but this nsl reads versions up to {target}; "
-            "upgrade nsl (pip install -U nsl), or set NSL_HOME to another workspace")
+            "upgrade nsl (pip install -U nsl), or set NSL_HOME to another workspace"
+        )
 
 
-def _migrate(conn: sqlite3.Connection, path: Path, migrations: Mapping[int, Callable[[sqlite3.Connection], None]],
-             target: int, code_version: str) -> None:
+def _migrate(
+    conn: sqlite3.Connection,
+    path: Path,
+    migrations: Mapping[int, Callable[[sqlite3.Connection], None]],
+    target: int,
+    code_version: str,
+) -> None:
     begin_immediate(conn)
     try:
         app_id, version, tables = _identify(conn)  # another process may have migrated meanwhile
@@ -246,8 +269,10 @@ def _migrate(conn: sqlite3.Connection, path: Path, migrations: Mapping[int, Call
             if v not in migrations:
                 raise IncompatibleVersionError(f"{path}: no migration to catalog schema version {v}; upgrade nsl")
             migrations[v](conn)
-            conn.execute("INSERT INTO schema_history (version, applied, code_version) VALUES (?, ?, ?)",
-                         (v, utc_now(), code_version))
+            conn.execute(
+                "INSERT INTO schema_history (version, applied, code_version) VALUES (?, ?, ?)",
+                (v, utc_now(), code_version),
+            )
         if version < target:
             conn.execute(f"PRAGMA application_id = {APPLICATION_ID}")
             conn.execute(f"PRAGMA user_version = {target}")

@@ -40,12 +40,31 @@ from nsl.version import code_version as _current_code_version
 
 from . import schema
 from .folders import (
-    WEIGHTS_FILE, checkpoint_id, content_digests, encode_config, folder_checkpoint_id, folder_digests, hash_tree,
-    read_config, write_card, write_model_folder,
+    WEIGHTS_FILE,
+    checkpoint_id,
+    content_digests,
+    encode_config,
+    folder_checkpoint_id,
+    folder_digests,
+    hash_tree,
+    read_config,
+    write_card,
+    write_model_folder,
 )
 from .records import (
-    CKPT_PREFIX, HEX_RE, RESERVED, CheckpointEntry, DatasetEntry, DataUse, EvaluationEntry, ResolvedData,
-    check_name, dumps, parse_checkpoint_ref, parse_data_ref, short_hash,
+    CKPT_PREFIX,
+    HEX_RE,
+    RESERVED,
+    CheckpointEntry,
+    DatasetEntry,
+    DataUse,
+    EvaluationEntry,
+    ResolvedData,
+    check_name,
+    dumps,
+    parse_checkpoint_ref,
+    parse_data_ref,
+    short_hash,
 )
 from .render import render_model_card
 
@@ -101,9 +120,17 @@ class Catalog:
         return str(p if p.is_absolute() else workspace.home().resolve() / p)
 
     # ------------------------------------------------------------- datasets
-    def register_dataset(self, name: str, version: int, path: Path | str, *, hash: str,
-                         shift: Mapping[str, Any] | str, episodes: int,
-                         provenance: Mapping[str, Any] | None = None) -> DatasetEntry:
+    def register_dataset(
+        self,
+        name: str,
+        version: int,
+        path: Path | str,
+        *,
+        hash: str,
+        shift: Mapping[str, Any] | str,
+        episodes: int,
+        provenance: Mapping[str, Any] | None = None,
+    ) -> DatasetEntry:
         """Record a dataset version that is complete on disk at ``path``.
 
         ``hash`` is the content hash from the dataset's manifest; ``shift``
@@ -126,20 +153,33 @@ class Catalog:
         if not path.exists():
             raise ConfigError(f"dataset path {path} does not exist; write the dataset before registering it")
         files = hash_tree(path)
-        row = (name, version, hash, dumps(shift_d), episodes, dumps(dict(provenance or {})),
-               self._store_path(path), dumps(files), schema.utc_now())
+        row = (
+            name,
+            version,
+            hash,
+            dumps(shift_d),
+            episodes,
+            dumps(dict(provenance or {})),
+            self._store_path(path),
+            dumps(files),
+            schema.utc_now(),
+        )
         with self.write() as c:
             old = c.execute("SELECT * FROM datasets WHERE name = ? AND version = ?", (name, version)).fetchone()
             if old is None:
-                c.execute("INSERT INTO datasets (name, version, hash, shift, episodes, provenance, path, files, "
-                          "created) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", row)
+                c.execute(
+                    "INSERT INTO datasets (name, version, hash, shift, episodes, provenance, path, files, "
+                    "created) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    row,
+                )
         if old is not None:
             existing = self._dataset_row(old)
             if existing.hash != hash:
                 raise ConfigError(
                     f"dataset {name}@v{version} is already registered with hash {short_hash(existing.hash)}, not "
                     f"{short_hash(hash)}; catalog entries are append-only: write the new data as "
-                    f"{name}@v{self.next_dataset_version(name)}")
+                    f"{name}@v{self.next_dataset_version(name)}"
+                )
             return existing
         return self.dataset(name, version)
 
@@ -151,8 +191,9 @@ class Catalog:
     def dataset(self, name: str, version: int | None = None) -> DatasetEntry:
         """The row for ``name`` at ``version`` (default: the newest); unknown names list near matches."""
         if version is None:
-            r = self.conn.execute("SELECT * FROM datasets WHERE name = ? ORDER BY version DESC LIMIT 1",
-                                  (name,)).fetchone()
+            r = self.conn.execute(
+                "SELECT * FROM datasets WHERE name = ? ORDER BY version DESC LIMIT 1", (name,)
+            ).fetchone()
         else:
             r = self.conn.execute("SELECT * FROM datasets WHERE name = ? AND version = ?", (name, version)).fetchone()
         if r is None:
@@ -164,8 +205,11 @@ class Catalog:
         return self._dataset_row(r)
 
     def datasets(self, name: str | None = None) -> list[DatasetEntry]:
-        q, a = ("SELECT * FROM datasets WHERE name = ? ORDER BY seq", (name,)) if name else (
-            "SELECT * FROM datasets ORDER BY seq", ())
+        q, a = (
+            ("SELECT * FROM datasets WHERE name = ? ORDER BY seq", (name,))
+            if name
+            else ("SELECT * FROM datasets ORDER BY seq", ())
+        )
         return [self._dataset_row(r) for r in self.conn.execute(q, a)]
 
     def resolve_data(self, ref: str) -> ResolvedData:
@@ -175,14 +219,33 @@ class Catalog:
 
     def _dataset_row(self, r: tuple) -> DatasetEntry:
         _seq, name, version, h, shift, episodes, prov, path, files, created = r
-        return DatasetEntry(name, version, h, json.loads(shift), episodes, json.loads(prov), self._load_path(path),
-                            created, json.loads(files))
+        return DatasetEntry(
+            name,
+            version,
+            h,
+            json.loads(shift),
+            episodes,
+            json.loads(prov),
+            self._load_path(path),
+            created,
+            json.loads(files),
+        )
 
     # ---------------------------------------------------------- checkpoints
-    def save_checkpoint(self, name: str, step: int, weights: bytes | Path, config: Mapping[str, Any], *,
-                        parent: str | None = None, data: Sequence[DataUse] = (), shift: str | None = None,
-                        card_info: Mapping[str, Any] | None = None, code_version: str | None = None,
-                        dest: Path | None = None) -> CheckpointEntry:
+    def save_checkpoint(
+        self,
+        name: str,
+        step: int,
+        weights: bytes | Path,
+        config: Mapping[str, Any],
+        *,
+        parent: str | None = None,
+        data: Sequence[DataUse] = (),
+        shift: str | None = None,
+        card_info: Mapping[str, Any] | None = None,
+        code_version: str | None = None,
+        dest: Path | None = None,
+    ) -> CheckpointEntry:
         """Write a model folder under ``$NSL_HOME/checkpoints/NAME/`` and register it.
 
         ``weights``: safetensors bytes or a ``.safetensors`` path; ``config``:
@@ -206,8 +269,9 @@ class Catalog:
         config_bytes = encode_config(config)
         files = content_digests(weights, config_bytes)
         stored: dict[str, Any] = json.loads(config_bytes)  # as it will read back from config.json
-        entry = self._new_checkpoint(checkpoint_id(weights, stored), name, step, parent, data, shift, stored,
-                                     code_version, Path("."), files)
+        entry = self._new_checkpoint(
+            checkpoint_id(weights, stored), name, step, parent, data, shift, stored, code_version, Path("."), files
+        )
         existing = self._checkpoint_or_none(entry.id)
         if existing is not None:
             return self._same_or_alias(existing, entry)
@@ -215,10 +279,18 @@ class Catalog:
         write_model_folder(dest, weights, stored, self._card(entry, card_info))
         return self._insert_checkpoint(entry, dest)
 
-    def register_checkpoint(self, folder: Path | str, *, name: str, step: int, parent: str | None = None,
-                            data: Sequence[DataUse] = (), shift: str | None = None,
-                            card_info: Mapping[str, Any] | None = None,
-                            code_version: str | None = None) -> CheckpointEntry:
+    def register_checkpoint(
+        self,
+        folder: Path | str,
+        *,
+        name: str,
+        step: int,
+        parent: str | None = None,
+        data: Sequence[DataUse] = (),
+        shift: str | None = None,
+        card_info: Mapping[str, Any] | None = None,
+        code_version: str | None = None,
+    ) -> CheckpointEntry:
         """Register a folder that already holds ``model.safetensors`` and ``config.json``.
 
         Writes its ``README.md`` card, then the row.  Arguments as in
@@ -227,38 +299,77 @@ class Catalog:
         check_name("checkpoint", name)
         folder = Path(folder)
         files = folder_digests(folder)
-        entry = self._new_checkpoint(folder_checkpoint_id(folder), name, step, parent, data, shift,
-                                     read_config(folder), code_version, folder, files)
+        entry = self._new_checkpoint(
+            folder_checkpoint_id(folder),
+            name,
+            step,
+            parent,
+            data,
+            shift,
+            read_config(folder),
+            code_version,
+            folder,
+            files,
+        )
         existing = self._checkpoint_or_none(entry.id)
         if existing is not None:
             return self._same_or_alias(existing, entry)
         write_card(folder, self._card(entry, card_info))
         return self._insert_checkpoint(entry, folder)
 
-    def _new_checkpoint(self, cid: str, name: str, step: int, parent: str | None, data: Sequence[DataUse],
-                        shift: str | None, config: dict, code_version: str | None, path: Path,
-                        files: dict[str, str]) -> CheckpointEntry:
+    def _new_checkpoint(
+        self,
+        cid: str,
+        name: str,
+        step: int,
+        parent: str | None,
+        data: Sequence[DataUse],
+        shift: str | None,
+        config: dict,
+        code_version: str | None,
+        path: Path,
+        files: dict[str, str],
+    ) -> CheckpointEntry:
         if not isinstance(step, int) or step < 0:
             raise ConfigError(f"step {step!r} for checkpoint {name!r} must be an integer >= 0")
         parent_entry = self.checkpoint(parent) if parent else None
         uses = []
         for u in data:
             if not isinstance(u, DataUse):
-                raise ConfigError(f"data entries must be DataUse records (got {u!r}); "
-                                  "use cat.resolve_data('data:NAME@vN').use(weight)")
+                raise ConfigError(
+                    f"data entries must be DataUse records (got {u!r}); "
+                    "use cat.resolve_data('data:NAME@vN').use(weight)"
+                )
             d = self.dataset(u.dataset, u.version)
             uses.append(DataUse(u.dataset, u.version, float(u.weight), u.tier, d.hash))
         if shift is None:
-            shift = (self.dataset(uses[-1].dataset, uses[-1].version).shift_name if uses
-                     else parent_entry.shift if parent_entry else "base")
+            shift = (
+                self.dataset(uses[-1].dataset, uses[-1].version).shift_name
+                if uses
+                else parent_entry.shift
+                if parent_entry
+                else "base"
+            )
         if not isinstance(shift, str) or not shift:
             raise ConfigError(f"shift {shift!r} for checkpoint {name!r} must be a shift name such as 'base'")
-        return CheckpointEntry(cid, name, step, parent_entry.id if parent_entry else None, shift, tuple(uses),
-                               config, code_version or _code_version(), str(path), schema.utc_now(), files)
+        return CheckpointEntry(
+            cid,
+            name,
+            step,
+            parent_entry.id if parent_entry else None,
+            shift,
+            tuple(uses),
+            config,
+            code_version or _code_version(),
+            str(path),
+            schema.utc_now(),
+            files,
+        )
 
     @staticmethod
     def _check_same(existing: CheckpointEntry, new: CheckpointEntry) -> None:
         """Refuse a registration of ``existing``'s content with another step, parent or data."""
+
         def key(e: CheckpointEntry) -> tuple:
             return e.step, e.parent, [(u.dataset, u.version, u.weight, u.tier) for u in e.data]
 
@@ -266,42 +377,86 @@ class Catalog:
             raise ConfigError(
                 f"identical weights and config are already registered as ckpt:{existing.ref} "
                 f"({existing.short_id}) with another step, parent or data; entries are append-only, "
-                f"so use ckpt:{existing.ref} instead")
+                f"so use ckpt:{existing.ref} instead"
+            )
 
     def _same_or_alias(self, existing: CheckpointEntry, new: CheckpointEntry) -> CheckpointEntry:
         """``existing`` again; under a new name (same step, parent and data) that name becomes its alias."""
         self._check_same(existing, new)
         if new.name not in self.names(existing.id):
             with self.write() as c:
-                c.execute("INSERT OR IGNORE INTO checkpoint_names (name, checkpoint, created) VALUES (?, ?, ?)",
-                          (new.name, existing.id, schema.utc_now()))
+                c.execute(
+                    "INSERT OR IGNORE INTO checkpoint_names (name, checkpoint, created) VALUES (?, ?, ?)",
+                    (new.name, existing.id, schema.utc_now()),
+                )
         return existing
 
     def names(self, checkpoint: str) -> list[str]:
         """Every name the checkpoint with id ``checkpoint`` is registered under, the first one first."""
-        return [n for (n,) in self.conn.execute("SELECT name FROM checkpoint_names WHERE checkpoint = ? ORDER BY seq",
-                                                (checkpoint,))]
+        return [
+            n
+            for (n,) in self.conn.execute(
+                "SELECT name FROM checkpoint_names WHERE checkpoint = ? ORDER BY seq", (checkpoint,)
+            )
+        ]
 
     def _insert_checkpoint(self, e: CheckpointEntry, path: Path) -> CheckpointEntry:
         with self.write() as c:
             if c.execute("SELECT 1 FROM checkpoints WHERE id = ?", (e.id,)).fetchone() is None:
-                c.execute("INSERT INTO checkpoints (id, name, step, parent, shift, data, config, code_version, "
-                          "path, files, created) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                          (e.id, e.name, e.step, e.parent, e.shift,
-                           dumps([{"dataset": u.dataset, "version": u.version, "weight": u.weight, "tier": u.tier,
-                                   "hash": u.hash} for u in e.data]),
-                           dumps(e.config), e.code_version, self._store_path(path), dumps(e.files), e.created))
-                c.executemany("INSERT OR IGNORE INTO checkpoint_data (checkpoint, dataset, version) VALUES (?, ?, ?)",
-                              [(e.id, u.dataset, u.version) for u in e.data])
-                c.execute("INSERT OR IGNORE INTO checkpoint_names (name, checkpoint, created) VALUES (?, ?, ?)",
-                          (e.name, e.id, e.created))
+                c.execute(
+                    "INSERT INTO checkpoints (id, name, step, parent, shift, data, config, code_version, "
+                    "path, files, created) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (
+                        e.id,
+                        e.name,
+                        e.step,
+                        e.parent,
+                        e.shift,
+                        dumps(
+                            [
+                                {
+                                    "dataset": u.dataset,
+                                    "version": u.version,
+                                    "weight": u.weight,
+                                    "tier": u.tier,
+                                    "hash": u.hash,
+                                }
+                                for u in e.data
+                            ]
+                        ),
+                        dumps(e.config),
+                        e.code_version,
+                        self._store_path(path),
+                        dumps(e.files),
+                        e.created,
+                    ),
+                )
+                c.executemany(
+                    "INSERT OR IGNORE INTO checkpoint_data (checkpoint, dataset, version) VALUES (?, ?, ?)",
+                    [(e.id, u.dataset, u.version) for u in e.data],
+                )
+                c.execute(
+                    "INSERT OR IGNORE INTO checkpoint_names (name, checkpoint, created) VALUES (?, ?, ?)",
+                    (e.name, e.id, e.created),
+                )
         return self._same_or_alias(self.checkpoint(e.id), e)  # another process may have registered it first
 
     def _checkpoint_row(self, r: tuple) -> CheckpointEntry:
         _seq, cid, name, step, parent, shift, data, config, code_version, path, files, created = r
         uses = tuple(DataUse(d["dataset"], d["version"], d["weight"], d["tier"], d["hash"]) for d in json.loads(data))
-        return CheckpointEntry(cid, name, step, parent, shift, uses, json.loads(config), code_version,
-                               self._load_path(path), created, json.loads(files))
+        return CheckpointEntry(
+            cid,
+            name,
+            step,
+            parent,
+            shift,
+            uses,
+            json.loads(config),
+            code_version,
+            self._load_path(path),
+            created,
+            json.loads(files),
+        )
 
     def _checkpoint_or_none(self, cid: str) -> CheckpointEntry | None:
         r = self.conn.execute("SELECT * FROM checkpoints WHERE id = ?", (cid,)).fetchone()
@@ -313,20 +468,34 @@ class Catalog:
 
     def checkpoints(self, name: str | None = None) -> list[CheckpointEntry]:
         """Checkpoints in registration order (all, or those registered under ``name``)."""
-        q, a = ("SELECT c.* FROM checkpoints c JOIN checkpoint_names n ON n.checkpoint = c.id WHERE n.name = ? "
-                "ORDER BY n.seq", (name,)) if name else ("SELECT * FROM checkpoints ORDER BY seq", ())
+        q, a = (
+            (
+                "SELECT c.* FROM checkpoints c JOIN checkpoint_names n ON n.checkpoint = c.id WHERE n.name = ? "
+                "ORDER BY n.seq",
+                (name,),
+            )
+            if name
+            else ("SELECT * FROM checkpoints ORDER BY seq", ())
+        )
         return [self._checkpoint_row(r) for r in self.conn.execute(q, a)]
 
     def children(self, checkpoint: str) -> list[CheckpointEntry]:
         """Checkpoints fine-tuned directly from the checkpoint with id ``checkpoint``."""
-        return [self._checkpoint_row(r) for r in
-                self.conn.execute("SELECT * FROM checkpoints WHERE parent = ? ORDER BY seq", (checkpoint,))]
+        return [
+            self._checkpoint_row(r)
+            for r in self.conn.execute("SELECT * FROM checkpoints WHERE parent = ? ORDER BY seq", (checkpoint,))
+        ]
 
     def trained_on(self, name: str, version: int) -> list[CheckpointEntry]:
         """Checkpoints whose training data included dataset ``name`` at ``version``."""
-        return [self._checkpoint_row(r) for r in self.conn.execute(
-            "SELECT c.* FROM checkpoints c JOIN checkpoint_data d ON d.checkpoint = c.id "
-            "WHERE d.dataset = ? AND d.version = ? ORDER BY c.seq", (name, version))]
+        return [
+            self._checkpoint_row(r)
+            for r in self.conn.execute(
+                "SELECT c.* FROM checkpoints c JOIN checkpoint_data d ON d.checkpoint = c.id "
+                "WHERE d.dataset = ? AND d.version = ? ORDER BY c.seq",
+                (name, version),
+            )
+        ]
 
     def lineage(self, ref: str) -> list[CheckpointEntry]:
         """The checkpoint and its ancestors, newest first (stops at a removed parent)."""
@@ -364,9 +533,18 @@ class Catalog:
         return write_card(Path(entry.path), self._card(entry, card_info))
 
     # ---------------------------------------------------------- evaluations
-    def add_evaluation(self, checkpoint: str, shift: str, *, episodes: int, successes: int, seed: int,
-                       split: str = "test", ci: tuple[float, float] | None = None,
-                       extra: Mapping[str, Any] | None = None) -> EvaluationEntry:
+    def add_evaluation(
+        self,
+        checkpoint: str,
+        shift: str,
+        *,
+        episodes: int,
+        successes: int,
+        seed: int,
+        split: str = "test",
+        ci: tuple[float, float] | None = None,
+        extra: Mapping[str, Any] | None = None,
+    ) -> EvaluationEntry:
         """Record ``successes`` out of ``episodes`` for a checkpoint on ``shift`` (a shift spec name).
 
         ``ci`` is the 95% interval (default: Wilson); ``extra`` any JSON
@@ -386,20 +564,36 @@ class Catalog:
             raise ConfigError(f"evaluation interval {ci!r} must satisfy 0 <= low <= high <= 1")
         key = (entry.id, shift, split, int(seed), episodes)
         with self.write() as c:
-            old = c.execute("SELECT * FROM evaluations WHERE checkpoint = ? AND shift = ? AND split = ? AND seed = ? "
-                            "AND episodes = ?", key).fetchone()
+            old = c.execute(
+                "SELECT * FROM evaluations WHERE checkpoint = ? AND shift = ? AND split = ? AND seed = ? "
+                "AND episodes = ?",
+                key,
+            ).fetchone()
             if old is None:
-                cur = c.execute("INSERT INTO evaluations (checkpoint, shift, split, episodes, successes, ci_low, "
-                                "ci_high, seed, extra, created) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                                (entry.id, shift, split, episodes, successes, float(lo), float(hi), int(seed),
-                                 dumps(dict(extra or {})), schema.utc_now()))
+                cur = c.execute(
+                    "INSERT INTO evaluations (checkpoint, shift, split, episodes, successes, ci_low, "
+                    "ci_high, seed, extra, created) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (
+                        entry.id,
+                        shift,
+                        split,
+                        episodes,
+                        successes,
+                        float(lo),
+                        float(hi),
+                        int(seed),
+                        dumps(dict(extra or {})),
+                        schema.utc_now(),
+                    ),
+                )
                 new_id = cur.lastrowid
         if old is not None:
             e = self._evaluation_row(old)
             if e.successes != successes:
                 raise ConfigError(
                     f"an evaluation of ckpt:{entry.ref} on {shift} ({split} objects, seed {seed}, {episodes} "
-                    f"episodes) is already recorded with {e.successes} successes; evaluate with another --seed")
+                    f"episodes) is already recorded with {e.successes} successes; evaluate with another --seed"
+                )
             return e
         return self._evaluation_row(self.conn.execute("SELECT * FROM evaluations WHERE id = ?", (new_id,)).fetchone())
 
@@ -439,8 +633,10 @@ class Catalog:
 
     def tags(self, checkpoint: str | None = None) -> dict[str, str]:
         """``{tag: checkpoint id}`` for current tags (optionally only those on one checkpoint)."""
-        rows = self.conn.execute("SELECT t.tag, t.checkpoint FROM tags t WHERE t.seq = "
-                                 "(SELECT MAX(seq) FROM tags u WHERE u.tag = t.tag) ORDER BY t.tag")
+        rows = self.conn.execute(
+            "SELECT t.tag, t.checkpoint FROM tags t WHERE t.seq = "
+            "(SELECT MAX(seq) FROM tags u WHERE u.tag = t.tag) ORDER BY t.tag"
+        )
         return {t: c for t, c in rows if c is not None and (checkpoint is None or c == checkpoint)}
 
 
@@ -471,27 +667,41 @@ def _shipped_base(cat: Catalog, name: str) -> CheckpointEntry | None:
     config = read_config(folder)
     record_file = folder / SHIPPED_RECORD
     record = json.loads(record_file.read_text()) if record_file.is_file() else {}
-    uses = tuple(DataUse(d["dataset"], int(d["version"]), float(d["weight"]), d.get("tier"), d.get("hash", ""))
-                 for d in record.get("data", []))
+    uses = tuple(
+        DataUse(d["dataset"], int(d["version"]), float(d["weight"]), d.get("tier"), d.get("hash", ""))
+        for d in record.get("data", [])
+    )
     entry = CheckpointEntry(
-        checkpoint_id(folder / WEIGHTS_FILE, config), SHIPPED_BASE, int(config.get("step", 0)), None,
-        record.get("target_shift") or "base", uses, config, str(config.get("code_version") or _code_version()),
-        ".", schema.utc_now(), content_digests(folder / WEIGHTS_FILE, encode_config(config)))
+        checkpoint_id(folder / WEIGHTS_FILE, config),
+        SHIPPED_BASE,
+        int(config.get("step", 0)),
+        None,
+        record.get("target_shift") or "base",
+        uses,
+        config,
+        str(config.get("code_version") or _code_version()),
+        ".",
+        schema.utc_now(),
+        content_digests(folder / WEIGHTS_FILE, encode_config(config)),
+    )
     existing = cat._checkpoint_or_none(entry.id)
     if existing is not None:
         return cat._same_or_alias(existing, entry)
     dest = workspace.checkpoints_dir() / SHIPPED_BASE / f"{entry.step:08d}-{entry.short_id}"
     sources = ", ".join(f"`{u.dataset}@v{u.version}` x{u.weight:g}" for u in uses) or "unrecorded data"
-    info = {"summary": f"The base checkpoint shipped with nsl (`nsl/assets/base`), pre-trained from scratch on "
-                       f"{sources}; `{SHIPPED_RECORD}` there records the exact training command.",
-            "tags": ["base"]}
+    info = {
+        "summary": f"The base checkpoint shipped with nsl (`nsl/assets/base`), pre-trained from scratch on "
+        f"{sources}; `{SHIPPED_RECORD}` there records the exact training command.",
+        "tags": ["base"],
+    }
     write_model_folder(dest, folder / WEIGHTS_FILE, config, cat._card(entry, info))
     return cat._insert_checkpoint(entry, dest)
 
 
 def _by_id_prefix(cat: Catalog, prefix: str) -> CheckpointEntry | None:
-    rows = cat.conn.execute("SELECT * FROM checkpoints WHERE id >= ? AND id < ? ORDER BY seq LIMIT 5",
-                            (prefix, prefix + "g")).fetchall()
+    rows = cat.conn.execute(
+        "SELECT * FROM checkpoints WHERE id >= ? AND id < ? ORDER BY seq LIMIT 5", (prefix, prefix + "g")
+    ).fetchall()
     if len(rows) > 1:
         shown = ", ".join(f"{r[1][:12]} ({r[2]}@{r[3]})" for r in rows)
         raise ConfigError(f"checkpoint id prefix {prefix!r} is ambiguous ({shown}); give more digits")
@@ -540,29 +750,43 @@ def resolve_checkpoint(cat: Catalog, ref: str, shift: str | None = None, split: 
     if sel.isdigit():
         entry = _newest(cat, name, int(sel))
         if entry is None:
-            steps = [s for (s,) in cat.conn.execute("SELECT DISTINCT c.step FROM checkpoints c JOIN checkpoint_names n "
-                                                    "ON n.checkpoint = c.id WHERE n.name = ? ORDER BY c.step",
-                                                    (name,))]
+            steps = [
+                s
+                for (s,) in cat.conn.execute(
+                    "SELECT DISTINCT c.step FROM checkpoints c JOIN checkpoint_names n "
+                    "ON n.checkpoint = c.id WHERE n.name = ? ORDER BY c.step",
+                    (name,),
+                )
+            ]
             shown = ", ".join(map(str, steps[:10])) + (", ..." if len(steps) > 10 else "")
-            raise UnknownReferenceError(f"checkpoint {name!r} has no step {sel}; its steps are {shown} "
-                                        f"(e.g. ckpt:{name}@{steps[-1]}, or ckpt:{name}@latest)")
+            raise UnknownReferenceError(
+                f"checkpoint {name!r} has no step {sel}; its steps are {shown} "
+                f"(e.g. ckpt:{name}@{steps[-1]}, or ckpt:{name}@latest)"
+            )
         return entry
     if sel == "best":
         return best_checkpoint(cat, name, shift=parsed.shift or shift, split=split)[0]
     tags = cat.tags()
     if sel not in tags:
         own = [t for t, c in tags.items() if cat.checkpoint(c).name == name]
-        raise unknown("tag", sel, own or tags,
-                      f"selectors are @STEP, @best, @latest or @TAG; tag with `nsl catalog tag ckpt:{name}@STEP TAG`")
+        raise unknown(
+            "tag",
+            sel,
+            own or tags,
+            f"selectors are @STEP, @best, @latest or @TAG; tag with `nsl catalog tag ckpt:{name}@STEP TAG`",
+        )
     entry = cat.checkpoint(tags[sel])
     if name not in cat.names(entry.id):
-        raise ConfigError(f"tag {sel!r} points to ckpt:{entry.ref}, not to a checkpoint of {name!r}; "
-                          f"write ckpt:{sel} for the tagged checkpoint")
+        raise ConfigError(
+            f"tag {sel!r} points to ckpt:{entry.ref}, not to a checkpoint of {name!r}; "
+            f"write ckpt:{sel} for the tagged checkpoint"
+        )
     return entry
 
 
-def best_checkpoint(cat: Catalog, name: str, shift: str | None = None,
-                    split: str | None = None) -> tuple[CheckpointEntry, dict]:
+def best_checkpoint(
+    cat: Catalog, name: str, shift: str | None = None, split: str | None = None
+) -> tuple[CheckpointEntry, dict]:
     """The best checkpoint of ``name`` (as defined in :func:`resolve_checkpoint`) and its pooled score.
 
     The score is ``{"shift", "split", "successes", "episodes", "rate"}``.
@@ -571,23 +795,30 @@ def best_checkpoint(cat: Catalog, name: str, shift: str | None = None,
     if newest is None:
         raise unknown("checkpoint", name, _names(cat), _HINT)
     shift = shift or newest.shift
-    q = ("SELECT n.seq, c.id, SUM(e.successes), SUM(e.episodes) FROM checkpoints c "
-         "JOIN checkpoint_names n ON n.checkpoint = c.id "
-         "JOIN evaluations e ON e.checkpoint = c.id WHERE n.name = ? AND e.shift = ?")
+    q = (
+        "SELECT n.seq, c.id, SUM(e.successes), SUM(e.episodes) FROM checkpoints c "
+        "JOIN checkpoint_names n ON n.checkpoint = c.id "
+        "JOIN evaluations e ON e.checkpoint = c.id WHERE n.name = ? AND e.shift = ?"
+    )
     args: list = [name, shift]
     if split is not None:
         q += " AND e.split = ?"
         args.append(split)
     rows = cat.conn.execute(q + " GROUP BY c.id", args).fetchall()
     if not rows:
-        shifts = [s for (s,) in cat.conn.execute(
-            "SELECT DISTINCT e.shift FROM evaluations e JOIN checkpoint_names n ON e.checkpoint = n.checkpoint "
-            "WHERE n.name = ?",
-            (name,))]
+        shifts = [
+            s
+            for (s,) in cat.conn.execute(
+                "SELECT DISTINCT e.shift FROM evaluations e JOIN checkpoint_names n ON e.checkpoint = n.checkpoint "
+                "WHERE n.name = ?",
+                (name,),
+            )
+        ]
         where = f"shift {shift!r}" + (f" ({split} objects)" if split else "")
         also = f"; it was evaluated on: {', '.join(sorted(shifts))} (use ckpt:{name}@best:SHIFT)" if shifts else ""
         raise UnknownReferenceError(
             f"ckpt:{name}@best: no checkpoint of {name!r} has an evaluation on {where}{also}; "
-            f"run `nsl eval --checkpoint ckpt:{name}@latest --shift {shift}` first")
+            f"run `nsl eval --checkpoint ckpt:{name}@latest --shift {shift}` first"
+        )
     seq, cid, s, n = max(rows, key=lambda r: (r[2] / r[3], r[3], r[0]))
     return cat.checkpoint(cid), {"shift": shift, "split": split, "successes": s, "episodes": n, "rate": s / n}

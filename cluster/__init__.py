@@ -14,5 +14,14 @@ a Ray executor is made.  See docs/scale.md.
 from .collect import RayChunkRunner
 from .executor import CLUSTER_ENV, Executor, RayExecutor, Unit, UnitFailed, add_option, open_executor, parse_cluster
 
-__all__ = ["CLUSTER_ENV", "Executor", "RayExecutor", "RayChunkRunner", "Unit", "UnitFailed", "add_option",
-           "open_executor", "parse_cluster"]
+__all__ = [
+    "CLUSTER_ENV",
+    "Executor",
+    "RayExecutor",
+    "RayChunkRunner",
+    "Unit",
+    "UnitFailed",
+    "add_option",
+    "open_executor",
+    "parse_cluster",
+]

@@ -54,13 +54,21 @@ class RayChunkRunner:
         ray = self.executor.connect()
         cpus = self.executor.cpus()
         window = self.window or max(4, 2 * cpus)
-        setup = ray.put({"key": uuid.uuid4().hex, "config": config, "make_policy": make_policy, "batch": batch,
-                         "env_version": ENV_VERSION})
-        task = _remote(ray, _run_chunks).options(num_cpus=1, max_retries=self.executor.max_retries,
-                                                 retry_exceptions=False)
+        setup = ray.put(
+            {
+                "key": uuid.uuid4().hex,
+                "config": config,
+                "make_policy": make_policy,
+                "batch": batch,
+                "env_version": ENV_VERSION,
+            }
+        )
+        task = _remote(ray, _run_chunks).options(
+            num_cpus=1, max_retries=self.executor.max_retries, retry_exceptions=False
+        )
         # about 8 episodes a task, but at least 4 tasks per CPU so that short runs spread and end together
         per_task = self.chunks_per_task or max(1, min(-(-8 // batch), -(-len(chunks) // (4 * cpus))))
-        todo = deque(chunks[k:k + per_task] for k in range(0, len(chunks), per_task))
+        todo = deque(chunks[k : k + per_task] for k in range(0, len(chunks), per_task))
         flight: deque = deque()
         try:
             while todo or flight:
@@ -85,7 +93,8 @@ def _run_chunks(setup: dict, chunks: list[list[int]], seed: int) -> tuple[str, l
 
         raise IncompatibleVersionError(
             f"node {ray.get_runtime_context().get_node_id()[:12]} runs simulator version {ENV_VERSION} but the driver "
-            f"runs {setup['env_version']}; install the same nsl on every node")
+            f"runs {setup['env_version']}; install the same nsl on every node"
+        )
     if _WORKER.get("key") != setup["key"]:
         _warm(setup)
     results = [list(run_episodes(_WORKER["envs"], _WORKER["policy"], indices, seed)) for indices in chunks]

@@ -55,10 +55,14 @@ def parse_cluster(value: str | None) -> str:
 
 def add_option(parser) -> None:
     """Add ``--cluster`` to a subcommand's parser."""
-    parser.add_argument("--cluster", default=None, metavar="local|ray|auto|ray://HOST:PORT",
-                        help=f"where simulators run: local processes (default, or ${CLUSTER_ENV}), Ray on this "
-                             "machine or at $RAY_ADDRESS (ray), or an existing Ray cluster (auto, ray://...); "
-                             "results are identical; see docs/scale.md")
+    parser.add_argument(
+        "--cluster",
+        default=None,
+        metavar="local|ray|auto|ray://HOST:PORT",
+        help=f"where simulators run: local processes (default, or ${CLUSTER_ENV}), Ray on this "
+        "machine or at $RAY_ADDRESS (ray), or an existing Ray cluster (auto, ray://...); "
+        "results are identical; see docs/scale.md",
+    )
 
 
 def import_ray(spec: str = "ray"):
@@ -170,16 +174,22 @@ class RayExecutor(Executor):
         if self.address is None:
             # Ray runs workers at niceness 15 by default: on a busy machine they would lose the CPU to every other
             # process, where local worker processes run at the caller's priority.
-            kwargs = {"include_dashboard": False, "logging_level": logging.WARNING,
-                      "_system_config": {"worker_niceness": 0}, **self.init_kwargs}
+            kwargs = {
+                "include_dashboard": False,
+                "logging_level": logging.WARNING,
+                "_system_config": {"worker_niceness": 0},
+                **self.init_kwargs,
+            }
             ray.init(address="local", **kwargs)
         else:
             try:
                 ray.init(address=self.address, logging_level=logging.WARNING)
             except ConnectionError as e:
-                raise EnvironmentSetupError(f"--cluster {self.name}: cannot reach a Ray cluster at {self.address} "
-                                            f"({str(e).splitlines()[0]}); start one with `ray start --head` "
-                                            "(docs/scale.md)") from None
+                raise EnvironmentSetupError(
+                    f"--cluster {self.name}: cannot reach a Ray cluster at {self.address} "
+                    f"({str(e).splitlines()[0]}); start one with `ray start --head` "
+                    "(docs/scale.md)"
+                ) from None
         self._started = True
         return ray
 
@@ -195,9 +205,9 @@ class RayExecutor(Executor):
     def submit(self, unit: Unit) -> None:
         ray = self.connect()
         task = _remote(ray, _call_unit)
-        ref = task.options(num_cpus=unit.num_cpus, max_retries=self.max_retries, retry_exceptions=False,
-                           name=f"nsl-unit:{unit.key}").remote(unit.fn, unit.args, unit.kwargs,
-                                                                 str(self._shared_marker()), unit.num_cpus)
+        ref = task.options(
+            num_cpus=unit.num_cpus, max_retries=self.max_retries, retry_exceptions=False, name=f"nsl-unit:{unit.key}"
+        ).remote(unit.fn, unit.args, unit.kwargs, str(self._shared_marker()), unit.num_cpus)
         self._pending[ref] = unit.key
 
     @property
@@ -253,7 +263,8 @@ def _call_unit(fn, args: tuple, kwargs: dict, marker: str, num_cpus: float):
     if not path.is_file():
         raise EnvironmentSetupError(
             f"NSL_HOME {path.parent.parent} of the driver is not visible on node {socket.gethostname()}; mount the "
-            "same shared folder at that path on every node (docs/scale.md)")
+            "same shared folder at that path on every node (docs/scale.md)"
+        )
     os.environ["NSL_HOME"] = str(path.parent.parent)
     torch = sys.modules.get("torch")
     if torch is not None:  # Ray gives a worker one thread; a unit gets one per CPU it holds

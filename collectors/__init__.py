@@ -37,8 +37,15 @@ _EXPORTS = {
     "parallel": ("collect_episodes",),
     "policies": ("Policy", "scripted_policy"),
     "rollout": ("Episode", "episode_seeds", "make_envs", "run_episodes"),
-    "shifts": ("SHIFT_NAMES", "SHIFTS", "STUDY_SEVERITIES", "STUDY_SHIFTS", "ShiftSpec", "parse_shift",
-               "parse_shift_list"),
+    "shifts": (
+        "SHIFT_NAMES",
+        "SHIFTS",
+        "STUDY_SEVERITIES",
+        "STUDY_SHIFTS",
+        "ShiftSpec",
+        "parse_shift",
+        "parse_shift_list",
+    ),
 }
 _WHERE = {name: module for module, names in _EXPORTS.items() for name in names}
 

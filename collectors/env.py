@@ -40,19 +40,25 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import gymnasium as gym
+import mujoco  # noqa: E402,I001
 import numpy as np
 
 from nsl import keys
 from nsl.errors import ConfigError
 from nsl.keys import ACTION_DIM, STATE_DIM  # noqa: F401  (re-exported by nsl.collectors)
 
-from .render import SceneRenderer  # sets MUJOCO_GL before mujoco is imported
-
-import mujoco  # noqa: E402,I001
-
 from . import objects as objlib  # noqa: E402
+from .render import SceneRenderer  # sets MUJOCO_GL before mujoco is imported
 from .scene import (  # noqa: E402
-    BIN_HALF, CAMERAS, START_Z, FINGER_OPEN, WORKSPACE_HALF, WRIST_Z_RANGE, ObjectSpec, build_spec, finger_tip_offset,
+    BIN_HALF,
+    CAMERAS,
+    FINGER_OPEN,
+    START_Z,
+    WORKSPACE_HALF,
+    WRIST_Z_RANGE,
+    ObjectSpec,
+    build_spec,
+    finger_tip_offset,
 )
 from .shifts import ShiftSpec, parse_shift  # noqa: E402
 
@@ -67,7 +73,9 @@ class EnvConfig:
     shift: str = "base"  # shift spec, e.g. "harsh_lighting" or "harsh_lighting+checkerboard_backing@0.5"
     split: str = "train"  # object split: "train" (folders not ending in 0) or "test"
     image_size: int = 64  # square camera resolution in pixels
-    camera: str = "wrist"  # "wrist" (rides on the wrist, looks between the fingers) or "shoulder" (fixed, frames the bin)
+    camera: str = (
+        "wrist"  # "wrist" (rides on the wrist, looks between the fingers) or "shoulder" (fixed, frames the bin)
+    )
     control: str = "auto_descent"  # "auto_descent" or "full" (see module doc)
     horizon: int = 0  # steps per episode; 0 means the mode's default (8 auto_descent, 20 full)
     min_objects: int = 1
@@ -89,14 +97,15 @@ class EnvConfig:
             raise ConfigError(f"image_size {self.image_size!r} is out of range; use 16..512 pixels (64 is standard)")
         if not 1 <= self.min_objects <= self.max_objects <= 5:
             raise ConfigError(
-                f"object count range ({self.min_objects}, {self.max_objects}) is invalid; use 1 <= min <= max <= 5")
+                f"object count range ({self.min_objects}, {self.max_objects}) is invalid; use 1 <= min <= max <= 5"
+            )
         if self.horizon < 0 or self.horizon > 20:
             raise ConfigError(f"horizon {self.horizon} is out of range; episodes last at most 20 steps (0 = default)")
         if self.split not in objlib.SPLITS:
             raise ConfigError(f"object split {self.split!r} is not one of {objlib.SPLITS}")
         if self.substeps < 1:
             raise ConfigError(f"substeps {self.substeps} must be at least 1")
-        self.shift_spec  # validates the shift name and severity
+        _ = self.shift_spec  # validates the shift name and severity
 
     @property
     def shift_spec(self) -> ShiftSpec:
@@ -148,21 +157,29 @@ class GraspEnv(gym.Env):
     # One frame per control step, at the nominal control rate that datasets record (nsl.keys.FPS).
     metadata = {"render_modes": ["rgb_array"], "render_fps": keys.FPS}
 
-    def __init__(self, config: EnvConfig | None = None, renderer: SceneRenderer | None = None,
-                 render_mode: str | None = None, **overrides: Any):
+    def __init__(
+        self,
+        config: EnvConfig | None = None,
+        renderer: SceneRenderer | None = None,
+        render_mode: str | None = None,
+        **overrides: Any,
+    ):
         if config is not None and overrides:
             raise ConfigError("pass either an EnvConfig or keyword overrides, not both")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ConfigError(f"render_mode {render_mode!r} is not supported; use one of "
-                              f"{self.metadata['render_modes']} (or None)")
+            raise ConfigError(
+                f"render_mode {render_mode!r} is not supported; use one of {self.metadata['render_modes']} (or None)"
+            )
         self.render_mode = render_mode  # render() returns the camera frame in either case
         self.config = config = EnvConfig(**overrides) if config is None else config
         self.shift = config.shift_spec
         n = config.image_size
-        self.observation_space = gym.spaces.Dict({
-            "image": gym.spaces.Box(0, 255, (n, n, 3), np.uint8),
-            "state": gym.spaces.Box(-1.0, 1.0, (STATE_DIM,), np.float32),
-        })
+        self.observation_space = gym.spaces.Dict(
+            {
+                "image": gym.spaces.Box(0, 255, (n, n, 3), np.uint8),
+                "state": gym.spaces.Box(-1.0, 1.0, (STATE_DIM,), np.float32),
+            }
+        )
         self.action_space = gym.spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
         if renderer is not None and (renderer.height, renderer.width) != (n, n):
             raise ConfigError(f"shared renderer is {renderer.height}x{renderer.width} but image_size is {n}")
@@ -184,7 +201,7 @@ class GraspEnv(gym.Env):
         spread = BIN_HALF - 0.045
         out: list[ObjectSpec] = []
         placed: list[tuple[float, float, float]] = []  # x, y, radius of objects already placed
-        for k, idx in enumerate(ids):
+        for idx in ids:
             mesh = objlib.load_mesh(self._object_ids[int(idx)])
             size = rng.uniform(*c.object_size)
             scale = objlib.scale_for(mesh, size)
@@ -202,13 +219,15 @@ class GraspEnv(gym.Env):
             else:
                 z = radius + 0.002 + 2 * max(pr for _, _, pr in placed) * len(placed)
             placed.append((float(x), float(y), radius))
-            out.append(ObjectSpec(
-                mesh_id=self._object_ids[int(idx)],
-                scale=(float(scale[0]), float(scale[1]), float(scale[2])),
-                rgba=_random_colour(rng),
-                pos=(float(x), float(y), float(z)),
-                quat=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
-            ))
+            out.append(
+                ObjectSpec(
+                    mesh_id=self._object_ids[int(idx)],
+                    scale=(float(scale[0]), float(scale[1]), float(scale[2])),
+                    rgba=_random_colour(rng),
+                    pos=(float(x), float(y), float(z)),
+                    quat=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
+                )
+            )
         return out
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -235,8 +254,9 @@ class GraspEnv(gym.Env):
         self._tip_below_wrist = -(float(fl.pos[2]) - float(fl.size[2]))
 
         # Start pose: wrist high above a random point near the bin centre, fingers open.
-        start = np.array([rng.uniform(-0.06, 0.06), rng.uniform(-0.06, 0.06), START_Z,
-                          rng.uniform(-math.pi / 2, math.pi / 2)])
+        start = np.array(
+            [rng.uniform(-0.06, 0.06), rng.uniform(-0.06, 0.06), START_Z, rng.uniform(-math.pi / 2, math.pi / 2)]
+        )
         self._target = start.copy()
         self._fingers = FINGER_OPEN
         for j, v in zip(("wrist_x", "wrist_y", "wrist_z", "wrist_yaw"), start):

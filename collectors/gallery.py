@@ -11,8 +11,15 @@ from .render import SceneRenderer
 from .shifts import ShiftSpec
 
 
-def render_gallery(shifts: list[ShiftSpec], out: Path, episodes: int = 4, seed: int = 0, image_size: int = 64,
-                   scale: int = 3, split: str = "train") -> Path:
+def render_gallery(
+    shifts: list[ShiftSpec],
+    out: Path,
+    episodes: int = 4,
+    seed: int = 0,
+    image_size: int = 64,
+    scale: int = 3,
+    split: str = "train",
+) -> Path:
     """Write a grid with one row per shift and one column per episode.
 
     Column ``k`` uses the same scene seed in every row, so a row differs from

@@ -30,8 +30,10 @@ class MeshData:
     extents: np.ndarray  # (3,) bounding-box size
 
     def __repr__(self) -> str:
-        return (f"MeshData({self.name!r}, vertices={self.vertices.shape}, "
-                f"faces={self.faces.shape}, extents={np.round(self.extents, 3).tolist()})")
+        return (
+            f"MeshData({self.name!r}, vertices={self.vertices.shape}, "
+            f"faces={self.faces.shape}, extents={np.round(self.extents, 3).tolist()})"
+        )
 
 
 @functools.cache

@@ -35,8 +35,15 @@ def _run_chunk(indices: list[int]) -> list[Episode]:
     return list(run_episodes(_WORKER["envs"], _WORKER["policy"], indices, _WORKER["seed"]))
 
 
-def collect_episodes(config: EnvConfig, make_policy: PolicyFactory, indices: Iterable[int], seed: int,
-                     workers: int = 1, batch: int = 1, runner: ChunkRunner | None = None) -> Iterator[Episode]:
+def collect_episodes(
+    config: EnvConfig,
+    make_policy: PolicyFactory,
+    indices: Iterable[int],
+    seed: int,
+    workers: int = 1,
+    batch: int = 1,
+    runner: ChunkRunner | None = None,
+) -> Iterator[Episode]:
     """Yield episodes ``indices`` in order, run by ``workers`` processes.
 
     ``make_policy`` is called once in each worker (it must be picklable, e.g. a
@@ -49,7 +56,7 @@ def collect_episodes(config: EnvConfig, make_policy: PolicyFactory, indices: Ite
         from nsl.errors import ConfigError
 
         raise ConfigError(f"workers {workers} must be at least 1")
-    chunks = [indices[k:k + batch] for k in range(0, len(indices), batch)]
+    chunks = [indices[k : k + batch] for k in range(0, len(indices), batch)]
     if runner is not None:
         for episodes in runner(config, make_policy, chunks, seed, batch):
             yield from episodes

@@ -31,8 +31,13 @@ class Policy(Protocol):
     name: str
     needs_privileged: bool
 
-    def __call__(self, obs: dict[str, np.ndarray], *, rngs: list[np.random.Generator],
-                 privileged: list[dict[str, np.ndarray]] | None = None) -> np.ndarray: ...
+    def __call__(
+        self,
+        obs: dict[str, np.ndarray],
+        *,
+        rngs: list[np.random.Generator],
+        privileged: list[dict[str, np.ndarray]] | None = None,
+    ) -> np.ndarray: ...
 
     def describe(self) -> dict[str, Any]: ...
 
@@ -98,7 +103,7 @@ class OraclePolicy:
             c, s = math.cos(yaw), math.sin(yaw)
             centre = np.array([x + c * off[0] - s * off[1], y + s * off[0] + c * off[1]])
             d = p["object_pos"][:, :2] - centre
-            k = int(np.argmin((d ** 2).sum(1)))
+            k = int(np.argmin((d**2).sum(1)))
             # A parallel jaw can grasp at yaw or yaw + pi; with an offset gripper the two
             # put the wrist in different places, so take the one that keeps it in reach.
             best = None
@@ -143,7 +148,9 @@ def scripted_policy(ref: str, control: str = "auto_descent", move_step: float = 
     """Build a scripted policy from ``random`` or ``oracle[:NOISE]``."""
     name, _, arg = ref.partition(":")
     if name not in SCRIPTED:
-        raise unknown("policy", ref, [*SCRIPTED, "oracle:NOISE", "ckpt:NAME"], "scripted policies are random and oracle[:NOISE]")
+        raise unknown(
+            "policy", ref, [*SCRIPTED, "oracle:NOISE", "ckpt:NAME"], "scripted policies are random and oracle[:NOISE]"
+        )
     if name == "random":
         if arg:
             raise ConfigError(f"policy {ref!r}: random takes no argument; write `random`")

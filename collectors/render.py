@@ -67,8 +67,15 @@ class SceneRenderer:
     @staticmethod
     def _signature(model: mujoco.MjModel) -> tuple:
         """Models with equal signatures can share an MjrContext after re-uploading meshes and textures."""
-        return (model.nmesh, model.ntex, model.nskin, model.nhfield, model.nflex,
-                tuple(model.tex_width), tuple(model.tex_height))
+        return (
+            model.nmesh,
+            model.ntex,
+            model.nskin,
+            model.nhfield,
+            model.nflex,
+            tuple(model.tex_width),
+            tuple(model.tex_height),
+        )
 
     def _bind(self, model: mujoco.MjModel) -> tuple[mujoco.MjrContext, mujoco.MjvScene]:
         entry = self._contexts.get(id(model))

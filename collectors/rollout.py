@@ -38,9 +38,11 @@ class Episode:
         return int(len(self.actions))
 
     def __repr__(self) -> str:
-        return (f"Episode(index={self.index}, length={self.length}, success={self.success}, "
-                f"images={self.images.shape}:{self.images.dtype}, actions={self.actions.shape}, "
-                f"terminated={self.terminated}, truncated={self.truncated})")
+        return (
+            f"Episode(index={self.index}, length={self.length}, success={self.success}, "
+            f"images={self.images.shape}:{self.images.dtype}, actions={self.actions.shape}, "
+            f"terminated={self.terminated}, truncated={self.truncated})"
+        )
 
 
 def episode_seeds(seed: int, index: int) -> tuple[int, np.random.Generator]:
@@ -57,7 +59,7 @@ def run_episodes(envs: list[GraspEnv], policy: Policy, indices: Iterable[int], s
     """
     indices = list(indices)
     for start in range(0, len(indices), len(envs)):
-        chunk = indices[start:start + len(envs)]
+        chunk = indices[start : start + len(envs)]
         yield from _run_batch(envs[: len(chunk)], policy, chunk, seed)
 
 
@@ -86,8 +88,12 @@ def _run_batch(envs: list[GraspEnv], policy: Policy, indices: list[int], seed: i
             f["rewards"].append(r)
             obs[j] = o
             if term or trunc:
-                ends[j] = {"terminated": term, "truncated": trunc, "success": bool(info["success"]),
-                           "num_objects": info["num_objects"]}
+                ends[j] = {
+                    "terminated": term,
+                    "truncated": trunc,
+                    "success": bool(info["success"]),
+                    "num_objects": info["num_objects"],
+                }
             else:
                 still.append(j)
         active = still
@@ -95,15 +101,19 @@ def _run_batch(envs: list[GraspEnv], policy: Policy, indices: list[int], seed: i
     for j, i in enumerate(indices):
         f, e = frames[j], ends[j]
         assert e is not None  # the loop above runs until every episode has ended
-        out.append(Episode(
-            index=i,
-            images=np.stack(f["images"]),
-            states=np.stack(f["states"]).astype(np.float32),
-            actions=np.stack(f["actions"]).astype(np.float32),
-            rewards=np.asarray(f["rewards"], dtype=np.float32),
-            terminated=e["terminated"], truncated=e["truncated"], success=e["success"],
-            info={"num_objects": e["num_objects"]},
-        ))
+        out.append(
+            Episode(
+                index=i,
+                images=np.stack(f["images"]),
+                states=np.stack(f["states"]).astype(np.float32),
+                actions=np.stack(f["actions"]).astype(np.float32),
+                rewards=np.asarray(f["rewards"], dtype=np.float32),
+                terminated=e["terminated"],
+                truncated=e["truncated"],
+                success=e["success"],
+                info={"num_objects": e["num_objects"]},
+            )
+        )
     return out
 
 

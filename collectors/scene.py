@@ -98,27 +98,37 @@ def build_spec(objects: list[ObjectSpec], shift: ShiftSpec, image_size: int = 64
     ceiling.castshadow = False
 
     box, plane = mujoco.mjtGeom.mjGEOM_BOX, mujoco.mjtGeom.mjGEOM_PLANE
-    world.add_geom(name="table", type=box, size=[0.5, 0.5, 0.02], pos=[0, 0, -0.0205], rgba=[0.55, 0.42, 0.3, 1],
-                   contype=0, conaffinity=0)
+    world.add_geom(
+        name="table",
+        type=box,
+        size=[0.5, 0.5, 0.02],
+        pos=[0, 0, -0.0205],
+        rgba=[0.55, 0.42, 0.3, 1],
+        contype=0,
+        conaffinity=0,
+    )
     # The bin floor is a plane: for collisions a half-space, so nothing can tunnel through it.
     spec.add_material(name="bin_floor", rgba=[0.42, 0.44, 0.47, 1])
-    world.add_geom(name="bin_floor", type=plane, size=[BIN_HALF, BIN_HALF, 0.01], pos=[0, 0, 0.0],
-                   material="bin_floor")
+    world.add_geom(name="bin_floor", type=plane, size=[BIN_HALF, BIN_HALF, 0.01], pos=[0, 0, 0.0], material="bin_floor")
     wall = [0.62, 0.64, 0.68, 1]
-    for i, (x, y, hx, hy) in enumerate([
-        (BIN_HALF + BIN_WALL_T, 0, BIN_WALL_T, BIN_HALF + 2 * BIN_WALL_T),
-        (-BIN_HALF - BIN_WALL_T, 0, BIN_WALL_T, BIN_HALF + 2 * BIN_WALL_T),
-        (0, BIN_HALF + BIN_WALL_T, BIN_HALF, BIN_WALL_T),
-        (0, -BIN_HALF - BIN_WALL_T, BIN_HALF, BIN_WALL_T),
-    ]):
-        world.add_geom(name=f"bin_wall{i}", type=box, size=[hx, hy, BIN_WALL_H / 2],
-                       pos=[x, y, BIN_WALL_H / 2], rgba=wall)
+    for i, (x, y, hx, hy) in enumerate(
+        [
+            (BIN_HALF + BIN_WALL_T, 0, BIN_WALL_T, BIN_HALF + 2 * BIN_WALL_T),
+            (-BIN_HALF - BIN_WALL_T, 0, BIN_WALL_T, BIN_HALF + 2 * BIN_WALL_T),
+            (0, BIN_HALF + BIN_WALL_T, BIN_HALF, BIN_WALL_T),
+            (0, -BIN_HALF - BIN_WALL_T, BIN_HALF, BIN_WALL_T),
+        ]
+    ):
+        world.add_geom(
+            name=f"bin_wall{i}", type=box, size=[hx, hy, BIN_WALL_H / 2], pos=[x, y, BIN_WALL_H / 2], rgba=wall
+        )
 
     # Framed on the bin, so that at 64x64 an object covers tens of pixels rather than a few; the
     # gripper leaves the top of the frame when it is high and near the back wall.
     cam_pos = np.array([0.0, -0.20, 0.34])
-    world.add_camera(name="shoulder", pos=cam_pos.tolist(), quat=_look_at_quat(cam_pos, np.array([0.0, 0.01, 0.0])),
-                     fovy=48.0)
+    world.add_camera(
+        name="shoulder", pos=cam_pos.tolist(), quat=_look_at_quat(cam_pos, np.array([0.0, 0.01, 0.0])), fovy=48.0
+    )
 
     _add_gripper(spec, image_size)
     for i, obj in enumerate(objects):
@@ -126,8 +136,11 @@ def build_spec(objects: list[ObjectSpec], shift: ShiftSpec, image_size: int = 64
     for i in range(len(objects), MAX_OBJECTS):
         # Unused mesh slots keep every scene's asset list the same shape, so the
         # renderer can reuse one GPU context across episodes (no geom uses them).
-        spec.add_mesh(name=f"mesh{i}", uservert=[0, 0, 0, 0.01, 0, 0, 0, 0.01, 0, 0, 0, 0.01],
-                      userface=[0, 1, 2, 0, 1, 3, 0, 2, 3, 1, 2, 3])
+        spec.add_mesh(
+            name=f"mesh{i}",
+            uservert=[0, 0, 0, 0.01, 0, 0, 0, 0.01, 0, 0, 0, 0.01],
+            userface=[0, 1, 2, 0, 1, 3, 0, 2, 3, 1, 2, 3],
+        )
     shift.apply(spec)
     return spec
 
@@ -139,41 +152,107 @@ def _add_gripper(spec: mujoco.MjSpec, image_size: int = 64) -> None:
 
     wrist = spec.worldbody.add_body(name="wrist", pos=[0, 0, 0], gravcomp=1.0)
     for axis_name, axis, rng in (("x", [1, 0, 0], WORKSPACE_HALF), ("y", [0, 1, 0], WORKSPACE_HALF)):
-        wrist.add_joint(name=f"wrist_{axis_name}", type=slide, axis=axis, range=[-rng, rng], limited=True,
-                        armature=0.01, damping=5.0)
-    wrist.add_joint(name="wrist_z", type=slide, axis=[0, 0, 1], range=list(WRIST_Z_RANGE), limited=True,
-                    armature=0.01, damping=5.0)
+        wrist.add_joint(
+            name=f"wrist_{axis_name}",
+            type=slide,
+            axis=axis,
+            range=[-rng, rng],
+            limited=True,
+            armature=0.01,
+            damping=5.0,
+        )
+    wrist.add_joint(
+        name="wrist_z", type=slide, axis=[0, 0, 1], range=list(WRIST_Z_RANGE), limited=True, armature=0.01, damping=5.0
+    )
     # The visible wrist and the arm link reaching back to the robot; visual only.
-    wrist.add_geom(name="wrist_geom", type=cyl, size=[0.022, 0.015, 0], pos=[0, 0, 0.0], rgba=dark,
-                   contype=0, conaffinity=0, mass=0.4)
-    wrist.add_geom(name="arm_link", type=cap, fromto=[0, 0, 0.015, 0.16, 0.22, 0.40], size=[0.022, 0, 0],
-                   rgba=[0.9, 0.55, 0.1, 1], contype=0, conaffinity=0, mass=0.01)
+    wrist.add_geom(
+        name="wrist_geom",
+        type=cyl,
+        size=[0.022, 0.015, 0],
+        pos=[0, 0, 0.0],
+        rgba=dark,
+        contype=0,
+        conaffinity=0,
+        mass=0.4,
+    )
+    wrist.add_geom(
+        name="arm_link",
+        type=cap,
+        fromto=[0, 0, 0.015, 0.16, 0.22, 0.40],
+        size=[0.022, 0, 0],
+        rgba=[0.9, 0.55, 0.1, 1],
+        contype=0,
+        conaffinity=0,
+        mass=0.01,
+    )
 
     # The wrist camera rides on the wrist (it moves with x, y and z but does not turn with the yaw), behind
     # the palm and tilted forward to look between the fingers at the floor below them.  World-frame motions
     # then shift the picture the same way wherever the gripper is, and the fingers stay in view.
     cam_pos = np.array(WRIST_CAM_POS)
-    wrist.add_camera(name="wrist", pos=cam_pos.tolist(), quat=_look_at_quat(cam_pos, np.array(WRIST_CAM_TARGET)),
-                     fovy=WRIST_CAM_FOVY)
+    wrist.add_camera(
+        name="wrist", pos=cam_pos.tolist(), quat=_look_at_quat(cam_pos, np.array(WRIST_CAM_TARGET)), fovy=WRIST_CAM_FOVY
+    )
 
     hand = wrist.add_body(name="hand", pos=[0, 0, 0], gravcomp=1.0)
-    hand.add_joint(name="wrist_yaw", type=hinge, axis=[0, 0, 1], range=[-math.pi, math.pi], limited=True,
-                   armature=0.005, damping=0.5)
-    hand.add_geom(name="flange", type=cyl, size=[0.018, 0.008, 0], pos=[0, 0, -0.022], rgba=metal, mass=0.1,
-                  contype=0, conaffinity=0)
+    hand.add_joint(
+        name="wrist_yaw",
+        type=hinge,
+        axis=[0, 0, 1],
+        range=[-math.pi, math.pi],
+        limited=True,
+        armature=0.005,
+        damping=0.5,
+    )
+    hand.add_geom(
+        name="flange",
+        type=cyl,
+        size=[0.018, 0.008, 0],
+        pos=[0, 0, -0.022],
+        rgba=metal,
+        mass=0.1,
+        contype=0,
+        conaffinity=0,
+    )
     # The bracket joins the flange to the finger mount; the offset shift lengthens it.
-    hand.add_geom(name="offset_bracket", type=box, size=[0.008, 1e-4, 0.006], pos=[0, 1e-4, -0.012], rgba=metal,
-                  contype=0, conaffinity=0, mass=0.01)
+    hand.add_geom(
+        name="offset_bracket",
+        type=box,
+        size=[0.008, 1e-4, 0.006],
+        pos=[0, 1e-4, -0.012],
+        rgba=metal,
+        contype=0,
+        conaffinity=0,
+        mass=0.01,
+    )
     mount = hand.add_body(name="finger_mount", pos=[0, 0, 0], gravcomp=1.0)
-    mount.add_geom(name="palm", type=box, size=[FINGER_OPEN + 0.012, 0.016, 0.008], pos=[0, 0, PALM_Z],
-                   rgba=metal, mass=0.15)
+    mount.add_geom(
+        name="palm", type=box, size=[FINGER_OPEN + 0.012, 0.016, 0.008], pos=[0, 0, PALM_Z], rgba=metal, mass=0.15
+    )
     fh = FINGER_HALF
     for side, sign in (("left", -1.0), ("right", 1.0)):
         f = mount.add_body(name=f"finger_{side}_body", pos=[0, 0, 0], gravcomp=1.0)
-        f.add_joint(name=f"finger_{side}", type=slide, axis=[sign, 0, 0], range=[0.0, FINGER_OPEN], limited=True,
-                    armature=0.001, damping=2.0)
-        f.add_geom(name=f"finger_{side}", type=box, size=list(fh), pos=[0, 0, FINGER_TOP - fh[2]], rgba=dark,
-                   friction=[1.5, 0.02, 0.001], condim=4, solref=[0.02, 1.0], mass=0.03, priority=1)
+        f.add_joint(
+            name=f"finger_{side}",
+            type=slide,
+            axis=[sign, 0, 0],
+            range=[0.0, FINGER_OPEN],
+            limited=True,
+            armature=0.001,
+            damping=2.0,
+        )
+        f.add_geom(
+            name=f"finger_{side}",
+            type=box,
+            size=list(fh),
+            pos=[0, 0, FINGER_TOP - fh[2]],
+            rgba=dark,
+            friction=[1.5, 0.02, 0.001],
+            condim=4,
+            solref=[0.02, 1.0],
+            mass=0.03,
+            priority=1,
+        )
 
     def position(name: str, joint: str, kp: float, force: float) -> None:
         act = spec.add_actuator(name=name, target=joint, trntype=mujoco.mjtTrn.mjTRN_JOINT)
@@ -192,9 +271,20 @@ def _add_gripper(spec: mujoco.MjSpec, image_size: int = 64) -> None:
 
 def _add_object(spec: mujoco.MjSpec, i: int, obj: ObjectSpec) -> None:
     mesh = load_mesh(obj.mesh_id)
-    spec.add_mesh(name=f"mesh{i}", uservert=(mesh.vertices * obj.scale).flatten().tolist(),
-                  userface=mesh.faces.flatten().tolist(), maxhullvert=32)
+    spec.add_mesh(
+        name=f"mesh{i}",
+        uservert=(mesh.vertices * obj.scale).flatten().tolist(),
+        userface=mesh.faces.flatten().tolist(),
+        maxhullvert=32,
+    )
     body = spec.worldbody.add_body(name=f"object{i}", pos=list(obj.pos), quat=list(obj.quat))
     body.add_freejoint(name=f"object{i}_joint")
-    body.add_geom(name=f"object{i}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"mesh{i}", rgba=list(obj.rgba),
-                  mass=0.08, friction=[1.0, 0.01, 0.001], condim=4)
+    body.add_geom(
+        name=f"object{i}",
+        type=mujoco.mjtGeom.mjGEOM_MESH,
+        meshname=f"mesh{i}",
+        rgba=list(obj.rgba),
+        mass=0.08,
+        friction=[1.0, 0.01, 0.001],
+        condim=4,
+    )

@@ -72,8 +72,13 @@ def _checkerboard_params(s: float) -> dict[str, float]:
 def _apply_checkerboard(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
     c = p["contrast"]
     spec.add_texture(
-        name="checker", type=mujoco.mjtTexture.mjTEXTURE_2D, builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
-        rgb1=[0.5 + 0.5 * c] * 3, rgb2=[0.5 - 0.5 * c] * 3, width=64, height=64,
+        name="checker",
+        type=mujoco.mjtTexture.mjTEXTURE_2D,
+        builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
+        rgb1=[0.5 + 0.5 * c] * 3,
+        rgb2=[0.5 - 0.5 * c] * 3,
+        width=64,
+        height=64,
     )
     mat = spec.material("bin_floor")
     mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "checker"
@@ -98,7 +103,11 @@ def _apply_transparent(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
 
 
 def _extend_params(s: float) -> dict[str, float]:
-    return {"extension_cm": 1.0 * s, "width_scale": 1.0 / (1.0 + 0.6 * min(s, 1.0)), "stiffness_scale": 1.0 + min(s, 1.0)}
+    return {
+        "extension_cm": 1.0 * s,
+        "width_scale": 1.0 / (1.0 + 0.6 * min(s, 1.0)),
+        "stiffness_scale": 1.0 + min(s, 1.0),
+    }
 
 
 def _apply_extend(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
@@ -133,16 +142,47 @@ def _apply_offset(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
 SHIFTS: dict[str, ShiftDef] = {
     d.name: d
     for d in [
-        ShiftDef("harsh_lighting", "lighting", 3.0, _harsh_lighting_params, _apply_harsh_lighting,
-                 "a bright low spotlight skims the bin: intensity 10 at severity 1 (the room light is 0.5), 12 deg elevation"),
-        ShiftDef("checkerboard_backing", "background", 1.0, _checkerboard_params, _apply_checkerboard,
-                 "a black/white checkerboard with one-inch squares under the bin; severity is contrast"),
-        ShiftDef("transparent_objects", "unseen objects", 1.15, _transparent_params, _apply_transparent,
-                 "objects become clear plastic: opacity 1 - 0.85*severity (0.15 at severity 1)"),
-        ShiftDef("extend_gripper", "gripper shape", 5.0, _extend_params, _apply_extend,
-                 "fingers 1 cm longer per unit severity, narrower and stiffer"),
-        ShiftDef("offset_gripper", "morphology", 2.0, _offset_params, _apply_offset,
-                 "fingers offset laterally from the controlled wrist by 10 cm per unit severity"),
+        ShiftDef(
+            "harsh_lighting",
+            "lighting",
+            3.0,
+            _harsh_lighting_params,
+            _apply_harsh_lighting,
+            "a bright low spotlight skims the bin: intensity 10 at severity 1 (the room light is 0.5), "
+            "12 deg elevation",
+        ),
+        ShiftDef(
+            "checkerboard_backing",
+            "background",
+            1.0,
+            _checkerboard_params,
+            _apply_checkerboard,
+            "a black/white checkerboard with one-inch squares under the bin; severity is contrast",
+        ),
+        ShiftDef(
+            "transparent_objects",
+            "unseen objects",
+            1.15,
+            _transparent_params,
+            _apply_transparent,
+            "objects become clear plastic: opacity 1 - 0.85*severity (0.15 at severity 1)",
+        ),
+        ShiftDef(
+            "extend_gripper",
+            "gripper shape",
+            5.0,
+            _extend_params,
+            _apply_extend,
+            "fingers 1 cm longer per unit severity, narrower and stiffer",
+        ),
+        ShiftDef(
+            "offset_gripper",
+            "morphology",
+            2.0,
+            _offset_params,
+            _apply_offset,
+            "fingers offset laterally from the controlled wrist by 10 cm per unit severity",
+        ),
     ]
 }
 SHIFT_NAMES = (BASE, *SHIFTS)
@@ -151,8 +191,13 @@ SHIFT_NAMES = (BASE, *SHIFTS)
 # base (ckpt:base) is closest to the study's drop in Table 5.1, within 15 points of it and at least 10
 # (scripts/experiments/calibrate_shifts.py on selection scenes; docs/experiments/shifts.md).
 # Severity 1 keeps its meaning, so datasets of any severity stay valid; ``--shift study`` is this list.
-STUDY_SEVERITIES = {"harsh_lighting": 2.0, "transparent_objects": 0.8, "checkerboard_backing": 0.4,
-                    "extend_gripper": 2.0, "offset_gripper": 0.25}
+STUDY_SEVERITIES = {
+    "harsh_lighting": 2.0,
+    "transparent_objects": 0.8,
+    "checkerboard_backing": 0.4,
+    "extend_gripper": 2.0,
+    "offset_gripper": 0.25,
+}
 STUDY_SHIFTS = tuple(f"{n}@{s:g}" if s != 1.0 else n for n, s in STUDY_SEVERITIES.items())
 
 
@@ -241,7 +286,9 @@ def parse_shift(text: str, severity: float | None = None) -> ShiftSpec:
             try:
                 value = float(sev)
             except ValueError:
-                raise ConfigError(f"severity {sev!r} in shift {token!r} is not a number; write e.g. {name}@1.5") from None
+                raise ConfigError(
+                    f"severity {sev!r} in shift {token!r} is not a number; write e.g. {name}@1.5"
+                ) from None
         else:
             value = 1.0 if severity is None else float(severity)
         parts.append(Shift(name, value))

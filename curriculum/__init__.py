@@ -13,12 +13,36 @@ Definitions (AUC, advantage, cost, arborescence, proxy) are in the module docstr
 ``docs/transfer.md``.
 """
 
-from .matrix import (SCRATCH, Advantage, TransferMatrix, advantage, load_matrix, matrix_from_dict, save_matrix,
-                     t_interval)
+from .matrix import (
+    SCRATCH,
+    Advantage,
+    TransferMatrix,
+    advantage,
+    load_matrix,
+    matrix_from_dict,
+    save_matrix,
+    t_interval,
+)
 from .plot import plot_curriculum
 from .rank import Candidate, Correlation, rank_candidates, rank_correlation
 from .tree import Curriculum, Tree, build_curriculum, edge_cost
 
-__all__ = ["SCRATCH", "Advantage", "Candidate", "Correlation", "Curriculum", "TransferMatrix", "Tree", "advantage",
-           "build_curriculum", "edge_cost", "load_matrix", "matrix_from_dict", "plot_curriculum", "rank_candidates",
-           "rank_correlation", "save_matrix", "t_interval"]
+__all__ = [
+    "SCRATCH",
+    "Advantage",
+    "Candidate",
+    "Correlation",
+    "Curriculum",
+    "TransferMatrix",
+    "Tree",
+    "advantage",
+    "build_curriculum",
+    "edge_cost",
+    "load_matrix",
+    "matrix_from_dict",
+    "plot_curriculum",
+    "rank_candidates",
+    "rank_correlation",
+    "save_matrix",
+    "t_interval",
+]

@@ -66,17 +66,24 @@ class TransferMatrix:
         for (src, dst), a in self.advantage.items():
             if src not in known or dst not in known:
                 bad = src if src not in known else dst
-                raise ConfigError(f"transfer matrix is not square: entry A({src} -> {dst}) names task {bad!r}, "
-                                  f"which is not in its tasks {list(tasks)}")
-            if a is not None and (not isinstance(a, (int, float)) or isinstance(a, bool) or not math.isfinite(a)
-                                  or a < 0):
-                raise ConfigError(f"transfer matrix entry A({src} -> {dst}) = {a!r} must be a finite number >= 0 "
-                                  "(a ratio of success-curve areas), or null if not measured")
+                raise ConfigError(
+                    f"transfer matrix is not square: entry A({src} -> {dst}) names task {bad!r}, "
+                    f"which is not in its tasks {list(tasks)}"
+                )
+            if a is not None and (
+                not isinstance(a, (int, float)) or isinstance(a, bool) or not math.isfinite(a) or a < 0
+            ):
+                raise ConfigError(
+                    f"transfer matrix entry A({src} -> {dst}) = {a!r} must be a finite number >= 0 "
+                    "(a ratio of success-curve areas), or null if not measured"
+                )
         missing = [(s, d) for s in tasks for d in tasks if s != d and (s, d) not in self.advantage]
         if missing:
             s, d = missing[0]
-            raise ConfigError(f"transfer matrix has no entry A({s} -> {d}) ({len(missing)} missing); every ordered "
-                              "pair of its tasks needs a value, or null if it was not measured")
+            raise ConfigError(
+                f"transfer matrix has no entry A({s} -> {d}) ({len(missing)} missing); every ordered "
+                "pair of its tasks needs a value, or null if it was not measured"
+            )
         if self.base is not None and self.base not in known:
             raise ConfigError(f"transfer matrix base {self.base!r} is not one of its tasks {list(tasks)}")
 
@@ -87,11 +94,19 @@ class TransferMatrix:
         return self.advantage[(src, dst)]
 
     def to_dict(self) -> dict[str, Any]:
-        return {"format": MATRIX_FORMAT, "version": MATRIX_VERSION, "tasks": list(self.tasks), "base": self.base,
-                "advantage": {s: {d: self.advantage[(s, d)] for d in self.tasks if d != s} for s in self.tasks},
-                "interval": {s: {d: list(self.interval[(s, d)]) for d in self.tasks if (s, d) in self.interval}
-                             for s in self.tasks if any((s, d) in self.interval for d in self.tasks)},
-                "meta": dict(self.meta)}
+        return {
+            "format": MATRIX_FORMAT,
+            "version": MATRIX_VERSION,
+            "tasks": list(self.tasks),
+            "base": self.base,
+            "advantage": {s: {d: self.advantage[(s, d)] for d in self.tasks if d != s} for s in self.tasks},
+            "interval": {
+                s: {d: list(self.interval[(s, d)]) for d in self.tasks if (s, d) in self.interval}
+                for s in self.tasks
+                if any((s, d) in self.interval for d in self.tasks)
+            },
+            "meta": dict(self.meta),
+        }
 
     def markdown(self, digits: int = 2) -> str:
         """The matrix as a Markdown table: rows fine-tune from, columns learn; intervals in brackets."""
@@ -102,8 +117,13 @@ class TransferMatrix:
             for d in self.tasks:
                 a = None if s == d else self.advantage[(s, d)]
                 ci = self.interval.get((s, d))
-                cells.append("-" if s == d else "n/a" if a is None else
-                             f"{a:.{digits}f}" + (f" [{ci[0]:.{digits}f}, {ci[1]:.{digits}f}]" if ci else ""))
+                cells.append(
+                    "-"
+                    if s == d
+                    else "n/a"
+                    if a is None
+                    else f"{a:.{digits}f}" + (f" [{ci[0]:.{digits}f}, {ci[1]:.{digits}f}]" if ci else "")
+                )
             lines.append(f"| {s} | " + " | ".join(cells) + " |")
         return "\n".join(lines)
 
@@ -114,8 +134,10 @@ def matrix_from_dict(d: Mapping[str, Any], source: str = "transfer matrix") -> T
         raise CorruptDataError(f"{source} must be a JSON object with 'tasks' and 'advantage'")
     version = d.get("version", MATRIX_VERSION)
     if d.get("format", MATRIX_FORMAT) != MATRIX_FORMAT or not isinstance(version, int) or version > MATRIX_VERSION:
-        raise CorruptDataError(f"{source} is {d.get('format')!r} version {d.get('version')!r}; this nsl reads "
-                               f"{MATRIX_FORMAT!r} up to version {MATRIX_VERSION}")
+        raise CorruptDataError(
+            f"{source} is {d.get('format')!r} version {d.get('version')!r}; this nsl reads "
+            f"{MATRIX_FORMAT!r} up to version {MATRIX_VERSION}"
+        )
     tasks, rows = d.get("tasks"), d.get("advantage")
     if not isinstance(tasks, list) or not all(isinstance(t, str) for t in tasks):
         raise ConfigError(f"{source}: 'tasks' must be a list of task names")
@@ -139,8 +161,10 @@ def load_matrix(path: str | Path) -> TransferMatrix:
     """Read and check a ``matrix.json``."""
     path = Path(path)
     if not path.is_file():
-        raise ConfigError(f"transfer matrix {path} does not exist; `nsl transfer run PLAN` writes one "
-                          "(or write {\"tasks\": [...], \"advantage\": {...}} by hand)")
+        raise ConfigError(
+            f"transfer matrix {path} does not exist; `nsl transfer run PLAN` writes one "
+            '(or write {"tasks": [...], "advantage": {...}} by hand)'
+        )
     try:
         data = json.loads(path.read_text())
     except json.JSONDecodeError as e:
@@ -157,6 +181,7 @@ def save_matrix(matrix: TransferMatrix, path: str | Path) -> Path:
 
 # --- one entry from measured curves ---------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class Advantage:
     """One entry A(src -> dst) from per-seed AUCs."""
@@ -167,8 +192,12 @@ class Advantage:
     floored: tuple[int, ...] = ()  # seeds whose scratch AUC was raised to the floor
 
     def to_dict(self) -> dict[str, Any]:
-        return {"value": self.value, "interval": None if self.interval is None else list(self.interval),
-                "per_seed": {str(k): v for k, v in self.per_seed.items()}, "floored": list(self.floored)}
+        return {
+            "value": self.value,
+            "interval": None if self.interval is None else list(self.interval),
+            "per_seed": {str(k): v for k, v in self.per_seed.items()},
+            "floored": list(self.floored),
+        }
 
 
 def advantage(ft_auc: Mapping[int, float], scratch_auc: Mapping[int, float], floor: float) -> Advantage:

@@ -39,11 +39,19 @@ def _draw(ax, tree: Tree, tasks: tuple[str, ...], title: str) -> None:
     pos = _layout(tree, tasks)
     for t in tasks:
         (x0, y0), (x1, y1) = pos[tree.parent[t]], pos[t]
-        ax.annotate("", xy=(x1, y1 + 0.12), xytext=(x0, y0 - 0.12),
-                    arrowprops={"arrowstyle": "-|>", "color": "0.35", "lw": 1.2})
+        ax.annotate(
+            "", xy=(x1, y1 + 0.12), xytext=(x0, y0 - 0.12), arrowprops={"arrowstyle": "-|>", "color": "0.35", "lw": 1.2}
+        )
         # labels nearer the child, where sibling edges have spread apart
-        ax.text(x0 + 0.65 * (x1 - x0), y0 + 0.65 * (y1 - y0), f"A={tree.advantage[t]:.2f}", fontsize=7, ha="center",
-                va="center", bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none"})
+        ax.text(
+            x0 + 0.65 * (x1 - x0),
+            y0 + 0.65 * (y1 - y0),
+            f"A={tree.advantage[t]:.2f}",
+            fontsize=7,
+            ha="center",
+            va="center",
+            bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none"},
+        )
     for v, (x, y) in pos.items():
         style = {"fc": "0.9", "ec": "0.4"} if v == SCRATCH else {"fc": "#dbe9f6", "ec": "tab:blue"}
         label = v.replace("_", "\n", 1)  # 'checkerboard_backing@0.6' on two lines, so that siblings do not overlap

@@ -34,8 +34,11 @@ class Correlation:
     def __str__(self) -> str:
         if self.rho is None:
             return f"Spearman rho: undefined ({self.n} pairs; at least 3 with varying values are needed)"
-        within = ("" if self.within_target is None else
-                  f"; within a target {self.within_target:+.2f} (mean over {self.targets} targets)")
+        within = (
+            ""
+            if self.within_target is None
+            else f"; within a target {self.within_target:+.2f} (mean over {self.targets} targets)"
+        )
         return f"Spearman rho {self.rho:+.2f} (p = {self.p_value:.3g}, {self.n} pairs){within}"
 
 
@@ -59,8 +62,12 @@ def rank_correlation(proxy: Mapping[Pair, float | None], advantage: Mapping[Pair
     by_target: dict[str, list[Pair]] = {}
     for p in pairs:
         by_target.setdefault(p[1], []).append(p)
-    within = [r for ps in by_target.values()
-              for r in [_spearman([proxy[p] for p in ps], [advantage[p] for p in ps])[0]] if r is not None]
+    within = [
+        r
+        for ps in by_target.values()
+        for r in [_spearman([proxy[p] for p in ps], [advantage[p] for p in ps])[0]]
+        if r is not None
+    ]
     return Correlation(rho, pval, len(pairs), sum(within) / len(within) if within else None, len(within))
 
 
@@ -85,7 +92,11 @@ class Candidate:
 
 
 def rank_candidates(candidates: Iterable[Candidate]) -> list[Candidate]:
-    """Measured candidates first (highest advantage first), then by proxy (highest first), then unscored; ties by ref."""
+    """Measured candidates first (highest advantage first), then by proxy (highest first), then unscored.
+
+    Ties go by ref.
+    """
+
     def key(c: Candidate):
         if c.measured is not None:
             return (0, -c.measured, c.ref)

@@ -70,8 +70,11 @@ class Tree:
         return [(self.parent[t], t, self.advantage[t]) for t in self.order(tasks)]
 
     def to_dict(self, tasks: Sequence[str]) -> dict[str, Any]:
-        return {"cost": self.cost, "order": self.order(tasks),
-                "edges": [{"from": s, "to": d, "advantage": a, "cost": edge_cost(a)} for s, d, a in self.edges(tasks)]}
+        return {
+            "cost": self.cost,
+            "order": self.order(tasks),
+            "edges": [{"from": s, "to": d, "advantage": a, "cost": edge_cost(a)} for s, d, a in self.edges(tasks)],
+        }
 
 
 @dataclass(frozen=True)
@@ -84,9 +87,15 @@ class Curriculum:
     base: str | None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"tasks": list(self.tasks), "base": self.base, "cost_definition": "C = -A(src -> dst); scratch edges -1",
-                "optimal": self.optimal.to_dict(self.tasks), "pessimal": self.pessimal.to_dict(self.tasks),
-                "from_base": self.from_base, "from_scratch": self.from_scratch}
+        return {
+            "tasks": list(self.tasks),
+            "base": self.base,
+            "cost_definition": "C = -A(src -> dst); scratch edges -1",
+            "optimal": self.optimal.to_dict(self.tasks),
+            "pessimal": self.pessimal.to_dict(self.tasks),
+            "from_base": self.from_base,
+            "from_scratch": self.from_scratch,
+        }
 
     def lines(self) -> list[str]:
         """The two trees and the four predicted costs, for a terminal."""
@@ -96,8 +105,7 @@ class Curriculum:
             out += [f"  {t:<28} from {s:<28} A = {a:.2f}" for s, t, a in tree.edges(self.tasks)]
         out.append("predicted cost (C = -A; lower is better):")
         rows = [("optimal", self.optimal.cost), ("pessimal", self.pessimal.cost)]
-        rows.append((f"all from the base ({self.base})" if self.base else "all from the base",
-                     self.from_base))
+        rows.append((f"all from the base ({self.base})" if self.base else "all from the base", self.from_base))
         rows.append(("all from scratch", self.from_scratch))
         out += [f"  {k:<32} {'n/a (no base task)' if v is None else f'{v:+.2f}'}" for k, v in rows]
         return out
@@ -107,8 +115,9 @@ def _check_tasks(matrix: TransferMatrix, tasks: Sequence[str] | None) -> tuple[s
     tasks = tuple(matrix.tasks if not tasks else tasks)
     for t in tasks:
         if t not in matrix.tasks:
-            raise UnknownReferenceError(f"task {t!r} is not in the transfer matrix; its tasks: "
-                                        f"{', '.join(matrix.tasks)}")
+            raise UnknownReferenceError(
+                f"task {t!r} is not in the transfer matrix; its tasks: {', '.join(matrix.tasks)}"
+            )
     if len(set(tasks)) != len(tasks):
         raise ConfigError(f"tasks {list(tasks)} repeat a task; name each once")
     order = {t: i for i, t in enumerate(matrix.tasks)}
@@ -116,8 +125,10 @@ def _check_tasks(matrix: TransferMatrix, tasks: Sequence[str] | None) -> tuple[s
     for s in tasks:
         for d in tasks:
             if s != d and matrix.get(s, d) is None:
-                raise ConfigError(f"transfer matrix has no measurement of A({s} -> {d}); finish `nsl transfer run` "
-                                  "or leave one of the two tasks out")
+                raise ConfigError(
+                    f"transfer matrix has no measurement of A({s} -> {d}); finish `nsl transfer run` "
+                    "or leave one of the two tasks out"
+                )
     return tasks
 
 
@@ -145,5 +156,6 @@ def build_curriculum(matrix: TransferMatrix, tasks: Sequence[str] | None = None)
     from_base = None
     if base is not None:
         from_base = edge_cost(1.0) + sum(edge_cost(matrix.get(base, t)) for t in tasks if t != base)
-    return Curriculum(tasks, _tree(matrix, tasks, 1), _tree(matrix, tasks, -1), from_base,
-                      len(tasks) * edge_cost(1.0), base)
+    return Curriculum(
+        tasks, _tree(matrix, tasks, 1), _tree(matrix, tasks, -1), from_base, len(tasks) * edge_cost(1.0), base
+    )

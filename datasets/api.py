@@ -33,10 +33,34 @@ from .versions import verify as _verify
 from .writer import EpisodeLike
 
 __all__ = [
-    "Collection", "DatasetVersion", "DatasetView", "EpisodeLike", "FrameLabels", "frame_labels", "Ref", "STANDARD_TIERS", "Sampler",
-    "TransitionSource", "dataset_names", "dataset_root", "episode_split", "export", "image_cache", "layout",
-    "list_datasets", "list_versions", "make_sampler", "open_version", "open_view", "parse_ref", "resolve",
-    "tiers", "to_hf_dataset", "unfinished", "verify", "write_dataset",
+    "Collection",
+    "DatasetVersion",
+    "DatasetView",
+    "EpisodeLike",
+    "FrameLabels",
+    "frame_labels",
+    "Ref",
+    "STANDARD_TIERS",
+    "Sampler",
+    "TransitionSource",
+    "dataset_names",
+    "dataset_root",
+    "episode_split",
+    "export",
+    "image_cache",
+    "layout",
+    "list_datasets",
+    "list_versions",
+    "make_sampler",
+    "open_version",
+    "open_view",
+    "parse_ref",
+    "resolve",
+    "tiers",
+    "to_hf_dataset",
+    "unfinished",
+    "verify",
+    "write_dataset",
 ]
 
 
@@ -73,10 +97,18 @@ def list_datasets() -> list[dict[str, Any]]:
         for ver in list_versions(name):
             v = open_version(f"{name}@v{ver}")
             spec = v.provenance["collections"][-1]["spec"]
-            out.append({"ref": v.ref, "hash": v.hash, "episodes": v.num_episodes, "frames": v.num_frames,
-                        "success_rate": float(v.episodes.success.mean()),
-                        "shift": spec.get("env", {}).get("shift"), "policy": spec.get("policy_ref"),
-                        "created": v.manifest.get("created", {}).get("time")})
+            out.append(
+                {
+                    "ref": v.ref,
+                    "hash": v.hash,
+                    "episodes": v.num_episodes,
+                    "frames": v.num_frames,
+                    "success_rate": float(v.episodes.success.mean()),
+                    "shift": spec.get("env", {}).get("shift"),
+                    "policy": spec.get("policy_ref"),
+                    "created": v.manifest.get("created", {}).get("time"),
+                }
+            )
     return out
 
 

@@ -59,8 +59,15 @@ class Collection:
     # -- planning ---------------------------------------------------------------------------------------------------
 
     @classmethod
-    def begin(cls, name: str, episodes: int, spec: dict[str, Any], image_size: int,
-              episodes_per_file: int = layout.DEFAULT_EPISODES_PER_FILE, restart: bool = False) -> Collection:
+    def begin(
+        cls,
+        name: str,
+        episodes: int,
+        spec: dict[str, Any],
+        image_size: int,
+        episodes_per_file: int = layout.DEFAULT_EPISODES_PER_FILE,
+        restart: bool = False,
+    ) -> Collection:
         """Plan (or resume) growing ``name`` to ``episodes`` episodes collected under ``spec``.
 
         ``spec`` is the provenance that defines the content (environment, policy,
@@ -79,12 +86,19 @@ class Collection:
                 raise ConfigError(
                     f"dataset {parent.ref} was collected with other settings ({_spec_summary(last['spec'])}, "
                     f"{parent.image_size}px); appending needs the same shift, policy, seed and image size, "
-                    f"or choose a new --dataset name")
+                    f"or choose a new --dataset name"
+                )
             episodes_per_file = int(parent.provenance.get("episodes_per_file", episodes_per_file))
-        plan: dict[str, Any] = {"format": layout.NSL_FORMAT, "start": start, "stop": max(start, episodes),
-                "episodes_per_file": episodes_per_file, "image_size": image_size, "spec": spec,
-                "parent": parent.hash if parent else None,
-                "first_file": _num_files(parent) if parent else 0}
+        plan: dict[str, Any] = {
+            "format": layout.NSL_FORMAT,
+            "start": start,
+            "stop": max(start, episodes),
+            "episodes_per_file": episodes_per_file,
+            "image_size": image_size,
+            "spec": spec,
+            "parent": parent.hash if parent else None,
+            "first_file": _num_files(parent) if parent else 0,
+        }
         staging = versions.dataset_root(name) / layout.STAGING_DIR
         for stale in versions.dataset_root(name).glob(".tmp-v*"):  # left by a run killed while publishing
             shutil.rmtree(stale, ignore_errors=True)
@@ -92,14 +106,15 @@ class Collection:
             shutil.rmtree(staging)
         old = _load_plan(staging)
         if old is not None:
-            same = ({k: v for k, v in old.items() if k not in ("stop", "spec")}
-                    == {k: v for k, v in plan.items() if k not in ("stop", "spec")}
-                    and _content_spec(old["spec"]) == _content_spec(plan["spec"]))
+            same = {k: v for k, v in old.items() if k not in ("stop", "spec")} == {
+                k: v for k, v in plan.items() if k not in ("stop", "spec")
+            } and _content_spec(old["spec"]) == _content_spec(plan["spec"])
             if not same:
                 raise ConfigError(
                     f"dataset {name} has an unfinished collection with other settings "
                     f"({_spec_summary(old['spec'])}, episodes {old['start']}..{old['stop']}); run that command "
-                    "again to finish it, or add --restart to discard it")
+                    "again to finish it, or add --restart to discard it"
+                )
         if plan["stop"] > start:
             staging.mkdir(parents=True, exist_ok=True)
             atomic_write_json(staging / PLAN_FILE, plan)
@@ -135,7 +150,7 @@ class Collection:
     def missing_indices(self) -> list[int]:
         """Episode indices still to collect, in order (staged files after a gap or of another plan are removed)."""
         staged = self.staged_files()
-        for n, _, _ in self.file_ranges()[len(staged):]:
+        for n, _, _ in self.file_ranges()[len(staged) :]:
             for p in (self.staging / layout.data_path(n), self.staging / layout.episodes_path(n)):
                 p.unlink(missing_ok=True)
         first = staged[-1][2] if staged else self.start
@@ -186,8 +201,10 @@ class Collection:
         staged = self.staged_files()
         if len(staged) != len(self.file_ranges()):
             missing = self.missing_indices()
-            raise ConfigError(f"dataset {self.name}: episodes {missing[0]}..{missing[-1]} are not collected yet; "
-                              "run the collection again to finish it")
+            raise ConfigError(
+                f"dataset {self.name}: episodes {missing[0]}..{missing[-1]} are not collected yet; "
+                "run the collection again to finish it"
+            )
         root = versions.dataset_root(self.name)
         version = (self.parent.version + 1) if self.parent else 1
         tmp = Path(tempfile.mkdtemp(prefix=f".tmp-v{version}-", dir=root))
@@ -215,10 +232,13 @@ class Collection:
 
     def _write_meta(self, tmp: Path) -> None:
         provenance = {
-            "format": layout.NSL_FORMAT, "image_size": self.plan["image_size"],
+            "format": layout.NSL_FORMAT,
+            "image_size": self.plan["image_size"],
             "episodes_per_file": self.plan["episodes_per_file"],
-            "collections": [*(self.parent.provenance["collections"] if self.parent else []),
-                            {"episodes": [self.start, self.stop], "spec": self.plan["spec"]}],
+            "collections": [
+                *(self.parent.provenance["collections"] if self.parent else []),
+                {"episodes": [self.start, self.stop], "spec": self.plan["spec"]},
+            ],
         }
         # Episode stats and totals come from the (small) episode metadata files only.
         episode_files = [f for f in versions.content_files(tmp) if f.startswith("meta/episodes/")]
@@ -230,9 +250,15 @@ class Collection:
     def _created(self, version: int, extra: dict[str, Any] | None) -> dict[str, Any]:
         from nsl import __version__, code_version
 
-        return {"name": self.name, "version": version, "parent": self.plan["parent"],
-                "time": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
-                "nsl_version": __version__, "code_version": code_version(), **(extra or {})}
+        return {
+            "name": self.name,
+            "version": version,
+            "parent": self.plan["parent"],
+            "time": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+            "nsl_version": __version__,
+            "code_version": code_version(),
+            **(extra or {}),
+        }
 
 
 def _num_files(v: DatasetVersion) -> int:
@@ -263,14 +289,21 @@ def unfinished() -> list[dict[str, Any]]:
             continue
         c = Collection(plan_path.parent.parent.name, plan, None)
         staged = sum(b - a for _, a, b in c.staged_files())
-        out.append({"name": c.name, "episodes": [c.start, c.stop], "staged": staged,
-                    "settings": _spec_summary(plan["spec"])})
+        out.append(
+            {"name": c.name, "episodes": [c.start, c.stop], "staged": staged, "settings": _spec_summary(plan["spec"])}
+        )
     return out
 
 
-def write_dataset(name: str, episodes: Iterable[writer.EpisodeLike], spec: dict[str, Any], image_size: int,
-                  count: int, episodes_per_file: int = layout.DEFAULT_EPISODES_PER_FILE,
-                  created: dict[str, Any] | None = None) -> DatasetVersion:
+def write_dataset(
+    name: str,
+    episodes: Iterable[writer.EpisodeLike],
+    spec: dict[str, Any],
+    image_size: int,
+    count: int,
+    episodes_per_file: int = layout.DEFAULT_EPISODES_PER_FILE,
+    created: dict[str, Any] | None = None,
+) -> DatasetVersion:
     """Write ``count`` episodes (indices continue the latest version) as a new version of ``name``."""
     latest = versions.list_versions(name)
     start = open_version(name).num_episodes if latest else 0

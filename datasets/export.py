@@ -78,7 +78,7 @@ def export(view: DatasetView, out: Path, repo_id: str | None = None) -> Path:
             (tmp / d).parent.mkdir(parents=True, exist_ok=True)
             (tmp / e).parent.mkdir(parents=True, exist_ok=True)
             if n == last_file and cut:
-                rgs = ep.row_group[:view.stop][ep.file_number[:view.stop] == n].tolist()
+                rgs = ep.row_group[: view.stop][ep.file_number[: view.stop] == n].tolist()
                 _write_subset(v.root / d, tmp / d, rgs)
                 rows = read_parquet(v.root / e).slice(0, len(rgs))
                 atomic_write_bytes(tmp / e, _table_bytes(rows))
@@ -89,13 +89,22 @@ def export(view: DatasetView, out: Path, repo_id: str | None = None) -> Path:
         per_episode = read_episode_stats(tmp, episode_files)
         info = layout.DatasetInfo.new(v.image_size, view.num_episodes, view.num_frames)
         atomic_write_bytes(tmp / layout.INFO_PATH, (json.dumps(info.to_dict(), indent=4) + "\n").encode())
-        atomic_write_bytes(tmp / layout.STATS_PATH,
-                           (json.dumps(statslib.to_json(statslib.aggregate(per_episode)), indent=4) + "\n").encode())
+        atomic_write_bytes(
+            tmp / layout.STATS_PATH,
+            (json.dumps(statslib.to_json(statslib.aggregate(per_episode)), indent=4) + "\n").encode(),
+        )
         writer.write_tasks(tmp)
-        card = CARD.format(ref=repo_id or view.ref, episodes=view.num_episodes, frames=view.num_frames,
-                           success=view.success_rate, content_hash=view.content_hash, version_hash=v.hash,
-                           provenance=json.dumps({"source": view.ref, **v.provenance,
-                                                  "created": v.manifest.get("created", {})}, indent=2))
+        card = CARD.format(
+            ref=repo_id or view.ref,
+            episodes=view.num_episodes,
+            frames=view.num_frames,
+            success=view.success_rate,
+            content_hash=view.content_hash,
+            version_hash=v.hash,
+            provenance=json.dumps(
+                {"source": view.ref, **v.provenance, "created": v.manifest.get("created", {})}, indent=2
+            ),
+        )
         atomic_write_bytes(tmp / "README.md", card.encode())
         if out.exists():
             out.rmdir()

@@ -79,8 +79,11 @@ def features(image_size: int) -> dict[str, dict[str, Any]]:
     """The LeRobot feature dict of an nsl grasping dataset (frame columns in order)."""
     scalar = {"shape": [1], "names": None}
     return {
-        keys.OBS_IMAGE: {"dtype": "image", "shape": [image_size, image_size, 3],
-                         "names": ["height", "width", "channels"]},
+        keys.OBS_IMAGE: {
+            "dtype": "image",
+            "shape": [image_size, image_size, 3],
+            "names": ["height", "width", "channels"],
+        },
         keys.OBS_STATE: {"dtype": "float32", "shape": [keys.STATE_DIM], "names": list(keys.STATE_NAMES)},
         keys.ACTION: {"dtype": "float32", "shape": [keys.ACTION_DIM], "names": list(keys.ACTION_NAMES)},
         keys.REWARD: {"dtype": "float32", **scalar},
@@ -116,14 +119,14 @@ def frame_schema(image_size: int) -> pa.Schema:
     """Arrow schema of a data file, with the ``huggingface`` metadata that ``datasets.Image`` needs."""
     fts = features(image_size)
     hf = {"info": {"features": {k: _hf_feature(ft) for k, ft in fts.items()}}}
-    return pa.schema([(k, _arrow_type(ft)) for k, ft in fts.items()],
-                     metadata={"huggingface": json.dumps(hf)})
+    return pa.schema([(k, _arrow_type(ft)) for k, ft in fts.items()], metadata={"huggingface": json.dumps(hf)})
 
 
 def _check(cond: bool, path: str, what: str) -> None:
     if not cond:
-        raise CorruptDataError(f"{path}: {what}; the file is not a valid nsl dataset info.json "
-                               f"(run `nsl dataset verify` on the version)")
+        raise CorruptDataError(
+            f"{path}: {what}; the file is not a valid nsl dataset info.json (run `nsl dataset verify` on the version)"
+        )
 
 
 @dataclass(frozen=True)
@@ -150,9 +153,13 @@ class DatasetInfo:
         if self.codebase_version != CODEBASE_VERSION:
             raise IncompatibleVersionError(
                 f"{p}: codebase_version {self.codebase_version!r} is not {CODEBASE_VERSION!r}; convert the "
-                "dataset with lerobot's v3.0 converter or re-collect it")
-        _check(self.total_episodes >= 0 and self.total_frames >= self.total_episodes, p,
-               f"totals episodes={self.total_episodes} frames={self.total_frames} are inconsistent")
+                "dataset with lerobot's v3.0 converter or re-collect it"
+            )
+        _check(
+            self.total_episodes >= 0 and self.total_frames >= self.total_episodes,
+            p,
+            f"totals episodes={self.total_episodes} frames={self.total_frames} are inconsistent",
+        )
         _check(self.fps > 0 and self.chunks_size > 0, p, f"fps={self.fps} chunks_size={self.chunks_size}")
         _check(self.data_path == DATA_PATH, p, f"data_path {self.data_path!r} is not {DATA_PATH!r}")
         _check(self.video_path is None, p, "videos are not used by nsl datasets (video_path must be null)")
@@ -162,11 +169,15 @@ class DatasetInfo:
             raise IncompatibleVersionError(
                 f"{p}: the dataset's gripper state is {state.get('names')}, but this nsl records "
                 f"{keys.STATE_NAMES} (environment v2); collect the dataset again with this nsl, "
-                "or set NSL_HOME to a new workspace")
+                "or set NSL_HOME to a new workspace"
+            )
         for k, ft in expected.items():
             got = self.features.get(k)
-            _check(got is not None and got["dtype"] == ft["dtype"] and list(got["shape"]) == ft["shape"], p,
-                   f"feature {k!r} is {got!r}, expected dtype {ft['dtype']} shape {ft['shape']}")
+            _check(
+                got is not None and got["dtype"] == ft["dtype"] and list(got["shape"]) == ft["shape"],
+                p,
+                f"feature {k!r} is {got!r}, expected dtype {ft['dtype']} shape {ft['shape']}",
+            )
 
     @property
     def image_size(self) -> int:
@@ -175,15 +186,32 @@ class DatasetInfo:
 
     @classmethod
     def new(cls, image_size: int, total_episodes: int, total_frames: int, **kw: Any) -> DatasetInfo:
-        return cls(total_episodes=total_episodes, total_frames=total_frames, features=features(image_size),
-                   splits={"train": f"0:{total_episodes}"}, **kw)
+        return cls(
+            total_episodes=total_episodes,
+            total_frames=total_frames,
+            features=features(image_size),
+            splits={"train": f"0:{total_episodes}"},
+            **kw,
+        )
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d.pop("source")
-        order = ["codebase_version", "robot_type", "total_episodes", "total_frames", "total_tasks", "chunks_size",
-                 "data_files_size_in_mb", "video_files_size_in_mb", "fps", "splits", "data_path", "video_path",
-                 "features"]
+        order = [
+            "codebase_version",
+            "robot_type",
+            "total_episodes",
+            "total_frames",
+            "total_tasks",
+            "chunks_size",
+            "data_files_size_in_mb",
+            "video_files_size_in_mb",
+            "fps",
+            "splits",
+            "data_path",
+            "video_path",
+            "features",
+        ]
         return {k: d[k] for k in order}
 
     @classmethod

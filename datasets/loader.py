@@ -81,15 +81,23 @@ def image_cache(version: DatasetVersion, progress: bool = False) -> np.ndarray:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
-    atomic_write_json(path / CACHE_META, {"hash": version.hash, "ref": version.ref, "frames": version.num_frames,
-                                          "shape": [version.num_frames, s, s, 3]})
+    atomic_write_json(
+        path / CACHE_META,
+        {
+            "hash": version.hash,
+            "ref": version.ref,
+            "frames": version.num_frames,
+            "shape": [version.num_frames, s, s, 3],
+        },
+    )
     arr = _open_cache(path, version)
     assert arr is not None
     return arr
 
 
-def n_step_returns(reward: np.ndarray, done: np.ndarray, has_next: np.ndarray, start: np.ndarray, n: int,
-                   gamma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def n_step_returns(
+    reward: np.ndarray, done: np.ndarray, has_next: np.ndarray, start: np.ndarray, n: int, gamma: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """For transitions starting at frames ``start``: (return, next frame, gamma^k, terminated), all (len(start),).
 
     ``reward``, ``done`` and ``has_next`` are per frame of episodes stored back to back; ``has_next``
@@ -130,8 +138,10 @@ class TransitionSource:
         n = len(cols[keys.INDEX])
         first = view.frame_range[0]
         if not np.array_equal(cols[keys.INDEX], np.arange(first, first + n)):
-            raise CorruptDataError(f"{view.version.ref}: the frame index column of {view.data_files()[0]} "
-                                   "is not contiguous; run `nsl dataset verify`")
+            raise CorruptDataError(
+                f"{view.version.ref}: the frame index column of {view.data_files()[0]} "
+                "is not contiguous; run `nsl dataset verify`"
+            )
         ep = cols[keys.EPISODE_INDEX]
         last = np.r_[ep[1:] != ep[:-1], True]
         done = cols[keys.DONE].astype(bool)
@@ -141,10 +151,15 @@ class TransitionSource:
         self._first = first
         self.states = cols[keys.OBS_STATE].astype(np.float32)  # per frame of the view (index - first)
         self.actions = cols[keys.ACTION].astype(np.float32)[local]  # per transition
-        reward, nxt, discount, term = n_step_returns(cols[keys.REWARD].astype(np.float64), done, keep, local,
-                                                     n_step, gamma)
+        reward, nxt, discount, term = n_step_returns(
+            cols[keys.REWARD].astype(np.float64), done, keep, local, n_step, gamma
+        )
         self.next_index = first + nxt
-        self.reward, self.discount, self.done = reward.astype(np.float32), discount.astype(np.float32), term.astype(np.float32)
+        self.reward, self.discount, self.done = (
+            reward.astype(np.float32),
+            discount.astype(np.float32),
+            term.astype(np.float32),
+        )
 
     def __len__(self) -> int:
         return len(self.obs_index)
@@ -180,8 +195,9 @@ class Sampler:
     def __init__(self, sources: Sequence[TransitionSource], weights: Sequence[float]):
         sizes = {s.view.version.image_size for s in sources}
         if len(sizes) != 1:
-            raise ConfigError(f"cannot mix datasets of different image sizes {sorted(sizes)}; "
-                              "collect them with the same --image-size")
+            raise ConfigError(
+                f"cannot mix datasets of different image sizes {sorted(sizes)}; collect them with the same --image-size"
+            )
         self.sources = list(sources)
         w = np.asarray(weights, dtype=np.float64)
         self.weights = w / w.sum()
@@ -197,11 +213,13 @@ class Sampler:
     def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
         b, s = int(batch_size), self.image_size
         out: dict[str, np.ndarray] = {
-            keys.OBS_IMAGE: np.empty((b, s, s, 3), np.uint8), keys.NEXT_OBS_IMAGE: np.empty((b, s, s, 3), np.uint8),
+            keys.OBS_IMAGE: np.empty((b, s, s, 3), np.uint8),
+            keys.NEXT_OBS_IMAGE: np.empty((b, s, s, 3), np.uint8),
             keys.OBS_STATE: np.empty((b, keys.STATE_DIM), np.float32),
             keys.NEXT_OBS_STATE: np.empty((b, keys.STATE_DIM), np.float32),
             keys.ACTION: np.empty((b, keys.ACTION_DIM), np.float32),
-            keys.REWARD: np.empty(b, np.float32), keys.DONE: np.empty(b, np.float32),
+            keys.REWARD: np.empty(b, np.float32),
+            keys.DONE: np.empty(b, np.float32),
         }
         if self.n_step > 1:
             out[keys.DISCOUNT] = np.empty(b, np.float32)
@@ -214,16 +232,23 @@ class Sampler:
         return out
 
     def describe(self) -> dict[str, Any]:
-        return {"transitions": len(self), "image_size": self.image_size,
-                **({"n_step": self.n_step, "gamma": self.gamma} if self.n_step > 1 else {}),
-                "sources": [{**s.describe(), "weight": float(w)} for s, w in zip(self.sources, self.weights)]}
+        return {
+            "transitions": len(self),
+            "image_size": self.image_size,
+            **({"n_step": self.n_step, "gamma": self.gamma} if self.n_step > 1 else {}),
+            "sources": [{**s.describe(), "weight": float(w)} for s, w in zip(self.sources, self.weights)],
+        }
 
 
 SourceSpec = str | DatasetView
 
 
-def make_sampler(sources: SourceSpec | Sequence[tuple[SourceSpec, float]], verify: bool = True, n_step: int = 1,
-                 gamma: float | None = None) -> Sampler:
+def make_sampler(
+    sources: SourceSpec | Sequence[tuple[SourceSpec, float]],
+    verify: bool = True,
+    n_step: int = 1,
+    gamma: float | None = None,
+) -> Sampler:
     """A sampler over ``[(ref or view, weight), ...]`` (or a single ref/view with weight 1).
 
     ``verify`` re-hashes the data files each source reads and refuses damaged
@@ -236,13 +261,17 @@ def make_sampler(sources: SourceSpec | Sequence[tuple[SourceSpec, float]], verif
         raise ConfigError(f"n-step transitions need the discount gamma in [0, 1]; got {gamma!r}")
     pairs = [(sources, 1.0)] if isinstance(sources, (str, DatasetView)) else list(sources)
     if not pairs:
-        raise ConfigError("make_sampler needs at least one (dataset, weight) pair, e.g. [('grasp-base', 0.5), "
-                          "('grasp-harsh:100', 0.5)]")
+        raise ConfigError(
+            "make_sampler needs at least one (dataset, weight) pair, e.g. [('grasp-base', 0.5), "
+            "('grasp-harsh:100', 0.5)]"
+        )
     for ref, w in pairs:
         if not (isinstance(w, (int, float)) and w > 0 and np.isfinite(w)):
             raise ConfigError(f"weight {w!r} of {ref} must be a positive number")
-    built = [TransitionSource(open_view(ref), verify=verify, n_step=n_step, gamma=1.0 if gamma is None else gamma)
-             for ref, _ in pairs]
+    built = [
+        TransitionSource(open_view(ref), verify=verify, n_step=n_step, gamma=1.0 if gamma is None else gamma)
+        for ref, _ in pairs
+    ]
     for (ref, _), src in zip(pairs, built):
         if len(src) == 0:
             raise ConfigError(f"dataset {ref} has no transitions (every episode was a one-frame truncation)")

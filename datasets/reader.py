@@ -25,11 +25,31 @@ from nsl.errors import ConfigError, CorruptDataError
 from . import layout, versions
 from . import stats as statslib
 
-NUMERIC_KEYS = (keys.OBS_STATE, keys.ACTION, keys.REWARD, keys.DONE, keys.SUCCESS, keys.TRUNCATED,
-                keys.TIMESTAMP, keys.FRAME_INDEX, keys.EPISODE_INDEX, keys.INDEX, keys.TASK_INDEX)
-_EP_COLUMNS = ["episode_index", "length", "data/chunk_index", "data/file_index", "dataset_from_index",
-               "dataset_to_index", layout.EP_SUCCESS, layout.EP_TERMINATED, layout.EP_TRUNCATED,
-               layout.EP_CONTENT_HASH]
+NUMERIC_KEYS = (
+    keys.OBS_STATE,
+    keys.ACTION,
+    keys.REWARD,
+    keys.DONE,
+    keys.SUCCESS,
+    keys.TRUNCATED,
+    keys.TIMESTAMP,
+    keys.FRAME_INDEX,
+    keys.EPISODE_INDEX,
+    keys.INDEX,
+    keys.TASK_INDEX,
+)
+_EP_COLUMNS = [
+    "episode_index",
+    "length",
+    "data/chunk_index",
+    "data/file_index",
+    "dataset_from_index",
+    "dataset_to_index",
+    layout.EP_SUCCESS,
+    layout.EP_TERMINATED,
+    layout.EP_TRUNCATED,
+    layout.EP_CONTENT_HASH,
+]
 
 
 def read_parquet(path: Path, columns: list[str] | None = None, row_groups: list[int] | None = None) -> pa.Table:
@@ -42,8 +62,10 @@ def read_parquet(path: Path, columns: list[str] | None = None, row_groups: list[
     except FileNotFoundError:
         raise CorruptDataError(f"file {path} is missing; run `nsl dataset verify` on the version") from None
     except (pa.ArrowException, OSError, ValueError) as e:
-        raise CorruptDataError(f"file {path} is damaged and cannot be read as Parquet "
-                               f"({str(e).splitlines()[0][:120]}); run `nsl dataset verify`") from None
+        raise CorruptDataError(
+            f"file {path} is damaged and cannot be read as Parquet "
+            f"({str(e).splitlines()[0][:120]}); run `nsl dataset verify`"
+        ) from None
 
 
 def decode_png(data: bytes, path: Path | str = "") -> np.ndarray:
@@ -106,8 +128,9 @@ class DatasetVersion:
         try:
             self.provenance: dict[str, Any] = json.loads((self.root / layout.NSL_META_PATH).read_text())
         except (OSError, json.JSONDecodeError):
-            raise CorruptDataError(f"file {self.root / layout.NSL_META_PATH} is missing or damaged; "
-                                   "run `nsl dataset verify`") from None
+            raise CorruptDataError(
+                f"file {self.root / layout.NSL_META_PATH} is missing or damaged; run `nsl dataset verify`"
+            ) from None
 
     @property
     def ref(self) -> str:
@@ -147,18 +170,27 @@ class DatasetVersion:
         order = np.arange(n)
         first_of_file = np.r_[True, file_number[1:] != file_number[:-1]]
         group_start = np.maximum.accumulate(np.where(first_of_file, order, 0))
-        ok = (n == self.num_episodes and np.array_equal(get["episode_index"], order)
-              and np.array_equal(get["dataset_from_index"], np.r_[0, np.cumsum(get["length"])[:-1]])
-              and int(get["length"].sum()) == self.num_frames)
+        ok = (
+            n == self.num_episodes
+            and np.array_equal(get["episode_index"], order)
+            and np.array_equal(get["dataset_from_index"], np.r_[0, np.cumsum(get["length"])[:-1]])
+            and int(get["length"].sum()) == self.num_frames
+        )
         if not ok:
-            raise CorruptDataError(f"{self.ref}: meta/episodes does not match meta/info.json "
-                                   f"({n} episode rows, info says {self.num_episodes}); run `nsl dataset verify`")
-        return EpisodeTable(length=get["length"].astype(np.int64), start=get["dataset_from_index"].astype(np.int64),
-                            file_number=file_number.astype(np.int64), row_group=order - group_start,
-                            success=get[layout.EP_SUCCESS].astype(bool),
-                            terminated=get[layout.EP_TERMINATED].astype(bool),
-                            truncated=get[layout.EP_TRUNCATED].astype(bool),
-                            content_hash=tuple(t[layout.EP_CONTENT_HASH].to_pylist()))
+            raise CorruptDataError(
+                f"{self.ref}: meta/episodes does not match meta/info.json "
+                f"({n} episode rows, info says {self.num_episodes}); run `nsl dataset verify`"
+            )
+        return EpisodeTable(
+            length=get["length"].astype(np.int64),
+            start=get["dataset_from_index"].astype(np.int64),
+            file_number=file_number.astype(np.int64),
+            row_group=order - group_start,
+            success=get[layout.EP_SUCCESS].astype(bool),
+            terminated=get[layout.EP_TERMINATED].astype(bool),
+            truncated=get[layout.EP_TRUNCATED].astype(bool),
+            content_hash=tuple(t[layout.EP_CONTENT_HASH].to_pylist()),
+        )
 
     def episode_stats(self) -> list[statslib.Stats]:
         """Per-episode stats (for pooling into ``meta/stats.json``)."""
@@ -169,10 +201,19 @@ class DatasetVersion:
 
     def describe(self) -> dict[str, Any]:
         ep = self.episodes
-        return {"ref": self.ref, "name": self.name, "version": self.version, "hash": self.hash,
-                "path": str(self.root), "episodes": self.num_episodes, "frames": self.num_frames,
-                "success_rate": float(ep.success.mean()) if len(ep) else 0.0, "image_size": self.image_size,
-                "provenance": self.provenance, "created": self.manifest.get("created", {})}
+        return {
+            "ref": self.ref,
+            "name": self.name,
+            "version": self.version,
+            "hash": self.hash,
+            "path": str(self.root),
+            "episodes": self.num_episodes,
+            "frames": self.num_frames,
+            "success_rate": float(ep.success.mean()) if len(ep) else 0.0,
+            "image_size": self.image_size,
+            "provenance": self.provenance,
+            "created": self.manifest.get("created", {}),
+        }
 
 
 class DatasetView:
@@ -180,8 +221,10 @@ class DatasetView:
 
     def __init__(self, version: DatasetVersion, start: int, stop: int):
         if not 0 <= start < stop <= version.num_episodes:
-            raise ConfigError(f"{version.ref} has {version.num_episodes} episodes; the range [{start}, {stop}) "
-                              f"is not inside it (tiers go up to :{version.num_episodes})")
+            raise ConfigError(
+                f"{version.ref} has {version.num_episodes} episodes; the range [{start}, {stop}) "
+                f"is not inside it (tiers go up to :{version.num_episodes})"
+            )
         self.version, self.start, self.stop = version, int(start), int(stop)
 
     @property
@@ -208,15 +251,15 @@ class DatasetView:
 
     @property
     def success_rate(self) -> float:
-        return float(self.version.episodes.success[self.start:self.stop].mean())
+        return float(self.version.episodes.success[self.start : self.stop].mean())
 
     @property
     def content_hash(self) -> str:
         """Hash of the view's episodes only: a tier has the same hash in every version containing it."""
-        return versions.tier_hash(list(self.version.episodes.content_hash[self.start:self.stop]))
+        return versions.tier_hash(list(self.version.episodes.content_hash[self.start : self.stop]))
 
     def data_files(self) -> list[str]:
-        numbers = np.unique(self.version.episodes.file_number[self.start:self.stop])
+        numbers = np.unique(self.version.episodes.file_number[self.start : self.stop])
         return [self.version.data_file(n) for n in numbers]
 
     def check(self, quick: bool = False) -> None:
@@ -228,8 +271,8 @@ class DatasetView:
     def _groups(self) -> Iterator[tuple[Path, list[int]]]:
         """(data file, row groups) pairs covering the view, in episode order."""
         ep = self.version.episodes
-        numbers = ep.file_number[self.start:self.stop]
-        groups = ep.row_group[self.start:self.stop]
+        numbers = ep.file_number[self.start : self.stop]
+        groups = ep.row_group[self.start : self.stop]
         for n in np.unique(numbers):
             yield self.version.root / self.version.data_file(n), groups[numbers == n].tolist()
 
@@ -242,8 +285,10 @@ class DatasetView:
                 parts[c].append(column_array(t[c]))
         out = {c: np.concatenate(v) for c, v in parts.items()}
         if len(out[columns[0]]) != self.num_frames:
-            raise CorruptDataError(f"{self.version.ref}: data files hold {len(out[columns[0]])} frames for "
-                                   f"episodes [{self.start}, {self.stop}), metadata says {self.num_frames}")
+            raise CorruptDataError(
+                f"{self.version.ref}: data files hold {len(out[columns[0]])} frames for "
+                f"episodes [{self.start}, {self.stop}), metadata says {self.num_frames}"
+            )
         return out
 
     def decode_images(self, out: np.ndarray | None = None) -> np.ndarray:
@@ -285,14 +330,21 @@ class DatasetView:
         n = self.num_episodes
         k = int(round(holdout * n)) if isinstance(holdout, float) and holdout < 1 else int(holdout)
         if not 1 <= k < n:
-            raise ConfigError(f"holdout {holdout!r} of {self.ref} ({n} episodes) must leave at least one "
-                              "episode on each side")
+            raise ConfigError(
+                f"holdout {holdout!r} of {self.ref} ({n} episodes) must leave at least one episode on each side"
+            )
         cut = self.stop - k
         return DatasetView(self.version, self.start, cut), DatasetView(self.version, cut, self.stop)
 
     def describe(self) -> dict[str, Any]:
-        return {"ref": self.ref, "version_hash": self.version.hash, "content_hash": self.content_hash,
-                "episodes": self.num_episodes, "frames": self.num_frames, "success_rate": self.success_rate}
+        return {
+            "ref": self.ref,
+            "version_hash": self.version.hash,
+            "content_hash": self.content_hash,
+            "episodes": self.num_episodes,
+            "frames": self.num_frames,
+            "success_rate": self.success_rate,
+        }
 
 
 def open_version(ref: str | versions.Ref) -> DatasetVersion:
@@ -309,6 +361,8 @@ def open_view(ref: str | versions.Ref | DatasetView) -> DatasetView:
     assert r.version is not None  # resolve() fills in the version
     v = DatasetVersion(r.name, r.version, root)
     if r.tier is not None and r.tier > v.num_episodes:
-        raise ConfigError(f"tier {r.tier} of {v.ref} is larger than the version ({v.num_episodes} episodes); "
-                          f"use :{v.num_episodes} or less, or collect more episodes")
+        raise ConfigError(
+            f"tier {r.tier} of {v.ref} is larger than the version ({v.num_episodes} episodes); "
+            f"use :{v.num_episodes} or less, or collect more episodes"
+        )
     return v.view(0, r.tier)

@@ -37,14 +37,22 @@ def feature_stats(values: np.ndarray, is_image: bool = False) -> dict[str, np.nd
         mean, std = (a.reshape(-1) for a in cv2.meanStdDev(tall))  # exact: sums in float64
         rows = tall.reshape(len(tall), -1)  # row-wise reductions vectorise; strided (N, 3) ones do not
         shape = (-1, 1, 1)
-        return {"min": (rows.min(0).reshape(-1, c).min(0) / 255.0).reshape(shape),
-                "max": (rows.max(0).reshape(-1, c).max(0) / 255.0).reshape(shape),
-                "mean": (mean / 255.0).reshape(shape), "std": (std / 255.0).reshape(shape),
-                "count": np.array([n])}
+        return {
+            "min": (rows.min(0).reshape(-1, c).min(0) / 255.0).reshape(shape),
+            "max": (rows.max(0).reshape(-1, c).max(0) / 255.0).reshape(shape),
+            "mean": (mean / 255.0).reshape(shape),
+            "std": (std / 255.0).reshape(shape),
+            "count": np.array([n]),
+        }
     flat = values.reshape(n, -1)
     as_float = flat.astype(np.float64)
-    return {"min": flat.min(0), "max": flat.max(0), "mean": as_float.mean(0), "std": as_float.std(0),
-            "count": np.array([n])}
+    return {
+        "min": flat.min(0),
+        "max": flat.max(0),
+        "mean": as_float.mean(0),
+        "std": as_float.std(0),
+        "count": np.array([n]),
+    }
 
 
 def episode_stats(frames: dict[str, np.ndarray], image_keys: Iterable[str]) -> Stats:
@@ -65,11 +73,16 @@ def aggregate(parts: list[Stats]) -> Stats:
         w = counts.reshape((-1,) + (1,) * (means.ndim - 1))
         total = counts.sum()
         mean = (w * means).sum(0) / total
-        var = (w * (stds ** 2 + (means - mean) ** 2)).sum(0) / total
+        var = (w * (stds**2 + (means - mean) ** 2)).sum(0) / total
         mins = np.stack([np.asarray(p[key]["min"]) for p in parts])
         maxs = np.stack([np.asarray(p[key]["max"]) for p in parts])
-        out[key] = {"min": mins.min(0), "max": maxs.max(0), "mean": mean, "std": np.sqrt(np.maximum(var, 0.0)),
-                    "count": np.array([int(total)])}
+        out[key] = {
+            "min": mins.min(0),
+            "max": maxs.max(0),
+            "mean": mean,
+            "std": np.sqrt(np.maximum(var, 0.0)),
+            "count": np.array([int(total)]),
+        }
     return out
 
 
@@ -93,6 +106,6 @@ def from_columns(row: dict[str, Any]) -> Stats:
     for col, value in row.items():
         if not col.startswith("stats/"):
             continue
-        key, _, stat = col[len("stats/"):].rpartition("/")
+        key, _, stat = col[len("stats/") :].rpartition("/")
         out.setdefault(key, {})[stat] = np.asarray(value)
     return out

@@ -53,8 +53,9 @@ def dataset_names() -> list[str]:
     root = datasets_dir()
     if not root.is_dir():
         return []
-    return sorted(p.name for p in root.iterdir()
-                  if p.is_dir() and refs.NAME_RE.fullmatch(p.name) and list_versions(p.name))
+    return sorted(
+        p.name for p in root.iterdir() if p.is_dir() and refs.NAME_RE.fullmatch(p.name) and list_versions(p.name)
+    )
 
 
 def list_versions(name: str) -> list[int]:
@@ -84,6 +85,7 @@ def resolve(ref: str | Ref) -> tuple[Ref, Path]:
 
 # -- manifests and hashes --------------------------------------------------------------------------------------------
 
+
 def content_files(root: Path) -> list[str]:
     """Relative paths of every file of a version except the manifest (and temporary files)."""
     root = Path(root)
@@ -104,8 +106,9 @@ def hash_of(files: dict[str, dict[str, Any]]) -> str:
     return HASH_PREFIX + h.hexdigest()
 
 
-def build_manifest(root: Path, known: dict[str, dict[str, Any]] | None = None,
-                   created: dict[str, Any] | None = None) -> dict[str, Any]:
+def build_manifest(
+    root: Path, known: dict[str, dict[str, Any]] | None = None, created: dict[str, Any] | None = None
+) -> dict[str, Any]:
     """Hash every file of ``root``; ``known`` reuses hashes of hard-linked files from a parent version."""
     files = {}
     for rel in content_files(root):
@@ -129,8 +132,9 @@ def load_manifest(root: Path) -> dict[str, Any]:
     return m
 
 
-def check_files(root: Path, manifest: dict[str, Any], only: list[str] | None = None, quick: bool = False,
-                label: str = "") -> None:
+def check_files(
+    root: Path, manifest: dict[str, Any], only: list[str] | None = None, quick: bool = False, label: str = ""
+) -> None:
     """Raise CorruptDataError naming the first file that is missing, truncated or altered.
 
     ``only`` restricts the check to some files; ``quick`` compares sizes, not hashes.
@@ -148,11 +152,14 @@ def check_files(root: Path, manifest: dict[str, Any], only: list[str] | None = N
         size = p.stat().st_size
         if size != want["size"]:
             kind = "truncated" if size < want["size"] else "altered"
-            raise CorruptDataError(f"{label}: file {p} is {kind} ({size} bytes, manifest says {want['size']}); "
-                                   "restore the version or re-collect it")
+            raise CorruptDataError(
+                f"{label}: file {p} is {kind} ({size} bytes, manifest says {want['size']}); "
+                "restore the version or re-collect it"
+            )
         if not quick and file_sha256(p) != want["sha256"]:
-            raise CorruptDataError(f"{label}: file {p} is altered (sha256 differs from the manifest); "
-                                   "restore the version or re-collect it")
+            raise CorruptDataError(
+                f"{label}: file {p} is altered (sha256 differs from the manifest); restore the version or re-collect it"
+            )
 
 
 def verify(root: Path, label: str = "") -> str:
@@ -161,11 +168,13 @@ def verify(root: Path, label: str = "") -> str:
     check_files(root, m, label=label)
     extra = sorted(set(content_files(root)) - set(m["files"]))
     if extra:
-        raise CorruptDataError(f"{label or root}: file {Path(root) / extra[0]} is not in the manifest "
-                               "(added after publication); remove it")
+        raise CorruptDataError(
+            f"{label or root}: file {Path(root) / extra[0]} is not in the manifest (added after publication); remove it"
+        )
     if hash_of(m["files"]) != m["hash"]:
-        raise CorruptDataError(f"{label or root}: {layout.MANIFEST_PATH} records hash {m['hash']} "
-                               "that does not match its file list")
+        raise CorruptDataError(
+            f"{label or root}: {layout.MANIFEST_PATH} records hash {m['hash']} that does not match its file list"
+        )
     return m["hash"]
 
 
@@ -178,6 +187,7 @@ def tier_hash(episode_hashes: list[str]) -> str:
 
 
 # -- publishing ------------------------------------------------------------------------------------------------------
+
 
 def link_or_copy(src: Path, dst: Path) -> None:
     """Hard-link ``src`` to ``dst`` (a new version shares its parent's immutable files), else copy."""
@@ -204,7 +214,9 @@ def publish(tmp: Path, name: str, version: int, manifest: dict[str, Any]) -> Pat
     atomic_write_json(Path(tmp) / layout.MANIFEST_PATH, manifest)
     final = version_dir(name, version)
     if final.exists():
-        raise ConfigError(f"dataset {name}@v{version} already exists (another collection published it); "
-                          "run the command again to append a new version")
+        raise ConfigError(
+            f"dataset {name}@v{version} already exists (another collection published it); "
+            "run the command again to append a new version"
+        )
     os.rename(tmp, final)
     return final

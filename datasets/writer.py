@@ -56,21 +56,24 @@ def encode_png(image: np.ndarray) -> bytes:
     """Lossless PNG bytes of an (H, W, 3) uint8 RGB image."""
     import cv2
 
-    ok, buf = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR),
-                           [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION])
+    ok, buf = cv2.imencode(
+        ".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION]
+    )
     if not ok:
         raise ValueError("PNG encoding failed")
     return buf.tobytes()
 
 
-def episode_frames(ep: EpisodeLike, episode_index: int, first_index: int, task_index: int = 0,
-                   fps: int = keys.FPS) -> dict[str, np.ndarray]:
+def episode_frames(
+    ep: EpisodeLike, episode_index: int, first_index: int, task_index: int = 0, fps: int = keys.FPS
+) -> dict[str, np.ndarray]:
     """The frame columns of one episode as arrays (images still raw uint8)."""
     images = np.asarray(ep.images)
     t = len(images)
     if t == 0 or images.dtype != np.uint8 or images.ndim != 4 or images.shape[-1] != 3:
-        raise ConfigError(f"episode {episode_index}: images must be (T, H, W, 3) uint8 with T >= 1, "
-                          f"got {images.shape}:{images.dtype}")
+        raise ConfigError(
+            f"episode {episode_index}: images must be (T, H, W, 3) uint8 with T >= 1, got {images.shape}:{images.dtype}"
+        )
     last = np.zeros(t, dtype=bool)
     last[-1] = True
     frames = {
@@ -139,9 +142,17 @@ def _parquet_bytes(tables: Sequence[pa.Table], schema: pa.Schema, no_dictionary:
     return sink.getvalue()
 
 
-def write_file_pair(root: Path, file_number: int, episodes: Sequence[EpisodeLike], first_episode: int,
-                    first_frame: int, image_size: int, chunks_size: int = layout.DEFAULT_CHUNKS_SIZE,
-                    task_index: int = 0, fps: int = keys.FPS) -> list[dict[str, Any]]:
+def write_file_pair(
+    root: Path,
+    file_number: int,
+    episodes: Sequence[EpisodeLike],
+    first_episode: int,
+    first_frame: int,
+    image_size: int,
+    chunks_size: int = layout.DEFAULT_CHUNKS_SIZE,
+    task_index: int = 0,
+    fps: int = keys.FPS,
+) -> list[dict[str, Any]]:
     """Write data file ``file_number`` and its episode metadata under ``root``; return the episode rows."""
     schema = layout.frame_schema(image_size)
     loc = layout.file_location(file_number, chunks_size)
@@ -150,8 +161,10 @@ def write_file_pair(root: Path, file_number: int, episodes: Sequence[EpisodeLike
     for j, ep in enumerate(episodes):
         frames = episode_frames(ep, first_episode + j, frame, task_index, fps)
         if frames[keys.OBS_IMAGE].shape[1:3] != (image_size, image_size):
-            raise ConfigError(f"episode {first_episode + j}: images are {frames[keys.OBS_IMAGE].shape[1:3]}, "
-                              f"the dataset is {image_size}x{image_size}")
+            raise ConfigError(
+                f"episode {first_episode + j}: images are {frames[keys.OBS_IMAGE].shape[1:3]}, "
+                f"the dataset is {image_size}x{image_size}"
+            )
         all_frames.append(frames)
         frame += len(frames[keys.INDEX])
     pngs = encode_pngs([im for f in all_frames for im in f[keys.OBS_IMAGE]])
@@ -159,28 +172,37 @@ def write_file_pair(root: Path, file_number: int, episodes: Sequence[EpisodeLike
     for j, (ep, frames) in enumerate(zip(episodes, all_frames)):
         idx = first_episode + j
         t = len(frames[keys.INDEX])
-        tables.append(frame_table(frames, schema, pngs[at:at + t]))
+        tables.append(frame_table(frames, schema, pngs[at : at + t]))
         at += t
         row = {
-            "episode_index": idx, "tasks": [layout.DEFAULT_TASK], "length": t,
-            "data/chunk_index": loc["chunk_index"], "data/file_index": loc["file_index"],
-            "dataset_from_index": frame, "dataset_to_index": frame + t,
+            "episode_index": idx,
+            "tasks": [layout.DEFAULT_TASK],
+            "length": t,
+            "data/chunk_index": loc["chunk_index"],
+            "data/file_index": loc["file_index"],
+            "dataset_from_index": frame,
+            "dataset_to_index": frame + t,
             **statslib.to_columns(statslib.episode_stats(frames, layout.IMAGE_KEYS)),
-            "meta/episodes/chunk_index": loc["chunk_index"], "meta/episodes/file_index": loc["file_index"],
-            layout.EP_SUCCESS: bool(ep.success), layout.EP_TERMINATED: bool(ep.terminated),
+            "meta/episodes/chunk_index": loc["chunk_index"],
+            "meta/episodes/file_index": loc["file_index"],
+            layout.EP_SUCCESS: bool(ep.success),
+            layout.EP_TERMINATED: bool(ep.terminated),
             layout.EP_TRUNCATED: bool(ep.truncated and not ep.terminated),
             layout.EP_CONTENT_HASH: content_hash(frames),
         }
         rows.append(row)
         frame += t
     write_episode_rows(root, file_number, rows, chunks_size)
-    atomic_write_bytes(Path(root) / layout.data_path(file_number, chunks_size),
-                       _parquet_bytes(tables, schema, no_dictionary=layout.IMAGE_KEYS))
+    atomic_write_bytes(
+        Path(root) / layout.data_path(file_number, chunks_size),
+        _parquet_bytes(tables, schema, no_dictionary=layout.IMAGE_KEYS),
+    )
     return rows
 
 
-def write_episode_rows(root: Path, file_number: int, rows: list[dict[str, Any]],
-                       chunks_size: int = layout.DEFAULT_CHUNKS_SIZE) -> None:
+def write_episode_rows(
+    root: Path, file_number: int, rows: list[dict[str, Any]], chunks_size: int = layout.DEFAULT_CHUNKS_SIZE
+) -> None:
     table = pa.Table.from_pylist(rows)
     path = Path(root) / layout.episodes_path(file_number, chunks_size)
     atomic_write_bytes(path, _parquet_bytes([table], table.schema))

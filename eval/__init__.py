@@ -32,12 +32,35 @@ _EXPORTS = {
     "config": ("CRITERIA", "EarlyStopConfig", "EarlyStopping", "EvalConfig"),
     "success": ("evaluate", "evaluate_outcomes", "run_eval_episodes"),
     "paired": ("PairedComparison", "compare_paired", "mcnemar_exact", "paired_difference_interval"),
-    "early_stopping": ("CriterionChoice", "EarlyStopMonitor",
-                       "choices_table", "choose_steps", "held_out_episodes", "load_early_stop", "offline_scores",
-                       "q_ranking_auc", "simulator_scorer", "soft_opc", "td_error"),
+    "early_stopping": (
+        "CriterionChoice",
+        "EarlyStopMonitor",
+        "choices_table",
+        "choose_steps",
+        "held_out_episodes",
+        "load_early_stop",
+        "offline_scores",
+        "q_ranking_auc",
+        "simulator_scorer",
+        "soft_opc",
+        "td_error",
+    ),
     "continual": ("ContinualMetrics", "continual_metrics", "curve_auc"),
-    "records": ("CURVE_FILE", "EARLY_STOP_FILE", "MATRIX_FILE", "REPORT_DIR", "TIERS_FILE", "CurveRow",
-                "PerformanceMatrix", "Rate", "TierResults", "TierRow", "read_curve", "read_eval_jsonl", "write_curve"),
+    "records": (
+        "CURVE_FILE",
+        "EARLY_STOP_FILE",
+        "MATRIX_FILE",
+        "REPORT_DIR",
+        "TIERS_FILE",
+        "CurveRow",
+        "PerformanceMatrix",
+        "Rate",
+        "TierResults",
+        "TierRow",
+        "read_curve",
+        "read_eval_jsonl",
+        "write_curve",
+    ),
     "report": ("ReportResult", "matrix_table", "tiers_table", "write_report"),
     "plots": ("plot_curve", "plot_matrix", "plot_tiers"),
 }
@@ -45,16 +68,38 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 
 
 if TYPE_CHECKING:  # static analysers see the eager imports
-    from .continual import ContinualMetrics, continual_metrics, curve_auc  # noqa: F401
     from .config import CRITERIA, EarlyStopConfig, EarlyStopping, EvalConfig  # noqa: F401
-    from .early_stopping import (CriterionChoice, EarlyStopMonitor,  # noqa: F401
-                                 choices_table, choose_steps, held_out_episodes, load_early_stop,
-                                 offline_scores, q_ranking_auc, simulator_scorer, soft_opc, td_error)
+    from .continual import ContinualMetrics, continual_metrics, curve_auc  # noqa: F401
+    from .early_stopping import (  # noqa: F401
+        CriterionChoice,
+        EarlyStopMonitor,
+        choices_table,
+        choose_steps,
+        held_out_episodes,
+        load_early_stop,
+        offline_scores,
+        q_ranking_auc,
+        simulator_scorer,
+        soft_opc,
+        td_error,
+    )
     from .paired import PairedComparison, compare_paired, mcnemar_exact, paired_difference_interval  # noqa: F401
     from .plots import plot_curve, plot_matrix, plot_tiers  # noqa: F401
-    from .records import (CURVE_FILE, EARLY_STOP_FILE, MATRIX_FILE, REPORT_DIR, TIERS_FILE,  # noqa: F401
-                          CurveRow, PerformanceMatrix, Rate, TierResults, TierRow, read_curve, read_eval_jsonl,
-                          write_curve)
+    from .records import (  # noqa: F401
+        CURVE_FILE,
+        EARLY_STOP_FILE,
+        MATRIX_FILE,
+        REPORT_DIR,
+        TIERS_FILE,
+        CurveRow,
+        PerformanceMatrix,
+        Rate,
+        TierResults,
+        TierRow,
+        read_curve,
+        read_eval_jsonl,
+        write_curve,
+    )
     from .report import ReportResult, matrix_table, tiers_table, write_report  # noqa: F401
     from .stats import SuccessRate, markdown_table, success_rate_from_outcomes, wilson_interval  # noqa: F401
     from .success import evaluate, evaluate_outcomes, run_eval_episodes  # noqa: F401

@@ -80,8 +80,7 @@ class EarlyStopConfig:
 
     def eval_config(self, base: bool = False, **overrides: Any) -> EvalConfig:
         """The EvalConfig of one evaluation (``base=True``: the base-task episodes)."""
-        return EvalConfig(**{"episodes": self.base_episodes if base else self.episodes, "seed": self.seed,
-                             **overrides})
+        return EvalConfig(**{"episodes": self.base_episodes if base else self.episodes, "seed": self.seed, **overrides})
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -142,6 +141,13 @@ class EarlyStopping:
         return self.stopped_step is not None
 
     def state_dict(self) -> dict:
-        return {"patience": self.patience, "min_delta": self.min_delta, "mode": self.mode,
-                "best_step": self.best_step, "best_value": self.best_value, "bad_evals": self.bad_evals,
-                "stopped_step": self.stopped_step, "history": [list(h) for h in self.history]}
+        return {
+            "patience": self.patience,
+            "min_delta": self.min_delta,
+            "mode": self.mode,
+            "best_step": self.best_step,
+            "best_value": self.best_value,
+            "bad_evals": self.bad_evals,
+            "stopped_step": self.stopped_step,
+            "history": [list(h) for h in self.history],
+        }

@@ -44,8 +44,9 @@ def curve_auc(steps, success) -> float:
     s = np.asarray(steps, dtype=float)
     v = np.asarray(success, dtype=float)
     if len(s) != len(v) or len(s) < 2:
-        raise ConfigError(f"a success curve needs at least 2 points with one step each; got {len(s)} steps, "
-                          f"{len(v)} values")
+        raise ConfigError(
+            f"a success curve needs at least 2 points with one step each; got {len(s)} steps, {len(v)} values"
+        )
     if np.any(np.diff(s) <= 0):
         raise ConfigError("a success curve's steps must increase")
     return float(np.sum((v[1:] + v[:-1]) * np.diff(s)) / 2.0 / (s[-1] - s[0]))
@@ -87,16 +88,30 @@ class ContinualMetrics:
         return _mean(self.forward_transfer_auc.values())
 
     def to_dict(self) -> dict:
-        per_task = ("trained_at", "final", "own_stage", "forgetting", "forgetting_end", "backward_transfer",
-                    "forward_transfer", "forward_transfer_auc", "zero_shot_transfer", "vs_base", "vs_single",
-                    "final_vs_single")
-        return {"matrix": self.matrix.to_dict(), "stages_done": len(self.matrix.stages) - 1,
-                "average_final_success": self.average_final_success,
-                "average_forgetting": self.average_forgetting,
-                "average_backward_transfer": self.average_backward_transfer,
-                "average_forward_transfer": self.average_forward_transfer,
-                "average_forward_transfer_auc": self.average_forward_transfer_auc,
-                "per_task": {name: dict(getattr(self, name)) for name in per_task}}
+        per_task = (
+            "trained_at",
+            "final",
+            "own_stage",
+            "forgetting",
+            "forgetting_end",
+            "backward_transfer",
+            "forward_transfer",
+            "forward_transfer_auc",
+            "zero_shot_transfer",
+            "vs_base",
+            "vs_single",
+            "final_vs_single",
+        )
+        return {
+            "matrix": self.matrix.to_dict(),
+            "stages_done": len(self.matrix.stages) - 1,
+            "average_final_success": self.average_final_success,
+            "average_forgetting": self.average_forgetting,
+            "average_backward_transfer": self.average_backward_transfer,
+            "average_forward_transfer": self.average_forward_transfer,
+            "average_forward_transfer_auc": self.average_forward_transfer_auc,
+            "per_task": {name: dict(getattr(self, name)) for name in per_task},
+        }
 
     def markdown(self, intervals: bool = True) -> str:
         """Table 5.3's shape (continual / vs base / vs single per trained task) plus final success and forgetting."""
@@ -108,16 +123,24 @@ class ContinualMetrics:
             t = self.trained_at[task]
             own = m.rate(t, j) if t is not None else None
             final = m.rate(len(m.stages) - 1, j)
-            lines.append(f"| {task} | {'-' if own is None else own.percent(intervals)} | "
-                         f"{_points(self.vs_base[task])} | {_points(self.vs_single[task])} | "
-                         f"{'-' if final is None else final.percent(intervals)} | {_points(self.forgetting[task])} |")
+            lines.append(
+                f"| {task} | {'-' if own is None else own.percent(intervals)} | "
+                f"{_points(self.vs_base[task])} | {_points(self.vs_single[task])} | "
+                f"{'-' if final is None else final.percent(intervals)} | {_points(self.forgetting[task])} |"
+            )
         lines.append("")
-        lines.append(f"Average final success {_pct(self.average_final_success)}; average forgetting "
-                     f"{_points(self.average_forgetting)} points; backward transfer "
-                     f"{_points(self.average_backward_transfer)} points; forward transfer "
-                     f"{_points(self.average_forward_transfer)} points"
-                     + (f" (AUC {self.average_forward_transfer_auc:+.2f})"
-                        if self.average_forward_transfer_auc is not None else "") + ".")
+        lines.append(
+            f"Average final success {_pct(self.average_final_success)}; average forgetting "
+            f"{_points(self.average_forgetting)} points; backward transfer "
+            f"{_points(self.average_backward_transfer)} points; forward transfer "
+            f"{_points(self.average_forward_transfer)} points"
+            + (
+                f" (AUC {self.average_forward_transfer_auc:+.2f})"
+                if self.average_forward_transfer_auc is not None
+                else ""
+            )
+            + "."
+        )
         return "\n".join(lines)
 
 
@@ -146,12 +169,24 @@ def continual_metrics(matrix: PerformanceMatrix) -> ContinualMetrics:
         return None if a is None or b is None else a - b
 
     trained_at: dict[str, int | None] = {}
-    for j, task in enumerate(m.tasks):
-        trained_at[task] = (m.stages.index(task, 1) if task in m.stages[1:] else
-                            0 if task == m.base_task else None)
-    out: dict[str, dict] = {k: {} for k in ("final", "own_stage", "forgetting", "forgetting_end", "backward_transfer",
-                                            "forward_transfer", "forward_transfer_auc", "zero_shot_transfer",
-                                            "vs_base", "vs_single", "final_vs_single")}
+    for task in m.tasks:
+        trained_at[task] = m.stages.index(task, 1) if task in m.stages[1:] else 0 if task == m.base_task else None
+    out: dict[str, dict] = {
+        k: {}
+        for k in (
+            "final",
+            "own_stage",
+            "forgetting",
+            "forgetting_end",
+            "backward_transfer",
+            "forward_transfer",
+            "forward_transfer_auc",
+            "zero_shot_transfer",
+            "vs_base",
+            "vs_single",
+            "final_vs_single",
+        )
+    }
     for j, task in enumerate(m.tasks):
         t = trained_at[task]
         final, own, initial = cell(T, j), cell(t, j), cell(0, j)

@@ -22,9 +22,8 @@ from __future__ import annotations
 
 import functools
 import json
-import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -34,11 +33,12 @@ from numpy.typing import ArrayLike
 from nsl.errors import ConfigError, CorruptDataError
 from nsl.workspace import atomic_write_json
 
-from .records import CURVE_FILE, EARLY_STOP_FILE, CurveRow, Rate, read_curve, write_curve
 from .config import CRITERIA, EarlyStopConfig, EarlyStopping, EvalConfig  # noqa: F401  (re-exported)
+from .records import CURVE_FILE, EARLY_STOP_FILE, CurveRow, Rate, read_curve, write_curve
 from .success import SuccessRate, run_eval_episodes
 
 # --- offline criteria -----------------------------------------------------------------------------------------------
+
 
 def _q_and_labels(q: ArrayLike, success: ArrayLike, what: str) -> tuple[np.ndarray, np.ndarray]:
     qa = np.asarray(q, dtype=np.float64).ravel()
@@ -71,7 +71,7 @@ def q_ranking_auc(q: ArrayLike, success: ArrayLike) -> float:
         end = start
         while end + 1 < len(qa) and sorted_q[end + 1] == sorted_q[start]:
             end += 1
-        ranks[order[start:end + 1]] = 0.5 * (start + end) + 1.0
+        ranks[order[start : end + 1]] = 0.5 * (start + end) + 1.0
         start = end + 1
     n_pos, n_neg = int(sa.sum()), int((~sa).sum())
     return float((ranks[sa].sum() - n_pos * (n_pos + 1) / 2.0) / (n_pos * n_neg))
@@ -90,8 +90,11 @@ def td_error(q: ArrayLike, target: ArrayLike) -> float:
 
 def offline_scores(q: ArrayLike, success: ArrayLike, target: ArrayLike | None = None) -> dict:
     """All offline criteria at once: ``{"softopc", "auc", "td_error" (if target given), "q_mean"}``."""
-    out = {"softopc": soft_opc(q, success), "auc": q_ranking_auc(q, success),
-           "q_mean": float(np.mean(np.asarray(q, dtype=np.float64)))}
+    out = {
+        "softopc": soft_opc(q, success),
+        "auc": q_ranking_auc(q, success),
+        "q_mean": float(np.mean(np.asarray(q, dtype=np.float64))),
+    }
     if target is not None:
         out["td_error"] = td_error(q, target)
     return out
@@ -168,8 +171,10 @@ class EarlyStopMonitor:
         changed = [k for k in ("seed", "episodes", "base_episodes") if k in old and old[k] != new[k]]
         if changed:
             was = ", ".join(f"{k} {old[k]}" for k in changed)
-            raise ConfigError(f"{self.run_dir.name}: its curve was evaluated with {was}; resume with the same "
-                              "settings (--eval-scenes, --eval-episodes, --base-episodes) or train under a new --name")
+            raise ConfigError(
+                f"{self.run_dir.name}: its curve was evaluated with {was}; resume with the same "
+                "settings (--eval-scenes, --eval-episodes, --base-episodes) or train under a new --name"
+            )
 
     def _replay(self, rows: list[CurveRow]) -> EarlyStopping:
         stopper = self.config.stopper()
@@ -200,13 +205,24 @@ class EarlyStopMonitor:
         from nsl import code_version
 
         s = self.stopper.state_dict()
-        atomic_write_json(self.run_dir / EARLY_STOP_FILE, {
-            "config": self.config.to_dict(), "criterion": self.config.criterion, "mode": self.config.mode,
-            "best_step": s["best_step"], "best_value": s["best_value"], "stopped_step": s["stopped_step"],
-            "bad_evals": s["bad_evals"], "references": dict(self.references), "code_version": code_version()})
+        atomic_write_json(
+            self.run_dir / EARLY_STOP_FILE,
+            {
+                "config": self.config.to_dict(),
+                "criterion": self.config.criterion,
+                "mode": self.config.mode,
+                "best_step": s["best_step"],
+                "best_value": s["best_value"],
+                "stopped_step": s["stopped_step"],
+                "bad_evals": s["bad_evals"],
+                "references": dict(self.references),
+                "code_version": code_version(),
+            },
+        )
 
 
 # --- how good is each criterion's choice? ---------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class CriterionChoice:
@@ -221,14 +237,20 @@ class CriterionChoice:
     target_regret: float | None  # best target success - target success at step (fraction)
 
     def to_dict(self) -> dict:
-        return {"criterion": self.criterion, "step": self.step, "stopped_at": self.stopped_at,
-                "target": None if self.target is None else self.target.to_dict(),
-                "base": None if self.base is None else self.base.to_dict(),
-                "step_gap": self.step_gap, "target_regret": self.target_regret}
+        return {
+            "criterion": self.criterion,
+            "step": self.step,
+            "stopped_at": self.stopped_at,
+            "target": None if self.target is None else self.target.to_dict(),
+            "base": None if self.base is None else self.base.to_dict(),
+            "step_gap": self.step_gap,
+            "target_regret": self.target_regret,
+        }
 
 
-def choose_steps(rows: Sequence[CurveRow], patience: int | None = None,
-                 min_delta: float = 0.0) -> dict[str, CriterionChoice]:
+def choose_steps(
+    rows: Sequence[CurveRow], patience: int | None = None, min_delta: float = 0.0
+) -> dict[str, CriterionChoice]:
     """Replay every criterion present in ``rows``; ``patience=None`` picks the best of the whole curve.
 
     Returns ``{"best": .., "final": .., "eval": .., "softopc": .., ...}`` (the
@@ -268,14 +290,18 @@ def choose_steps(rows: Sequence[CurveRow], patience: int | None = None,
 
 def choices_table(choices: Mapping[str, CriterionChoice]) -> str:
     """Markdown: one row per criterion with its step, successes (95% intervals) and distance from the best."""
-    lines = ["| criterion | chosen step | stopped at | target success | base success | steps from best | "
-             "target regret (points) |", "|---|---|---|---|---|---|---|"]
+    lines = [
+        "| criterion | chosen step | stopped at | target success | base success | steps from best | "
+        "target regret (points) |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for c in choices.values():
         lines.append(
             f"| {c.criterion} | {c.step} | {'-' if c.stopped_at is None else c.stopped_at} | "
             f"{'-' if c.target is None else c.target.percent()} | {'-' if c.base is None else c.base.percent()} | "
             f"{'-' if c.step_gap is None else f'{c.step_gap:+d}'} | "
-            f"{'-' if c.target_regret is None else f'{100 * c.target_regret:.0f}'} |")
+            f"{'-' if c.target_regret is None else f'{100 * c.target_regret:.0f}'} |"
+        )
     return "\n".join(lines)
 
 

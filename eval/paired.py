@@ -25,8 +25,8 @@ from scipy.stats import binomtest
 from nsl.errors import ConfigError
 from nsl.stats import Z95, wilson_interval
 
-
 # --- paired episodes: McNemar ---------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class PairedComparison:
@@ -56,13 +56,14 @@ class PairedComparison:
         return (self.only_a - self.only_b) / self.episodes
 
     def to_dict(self) -> dict:
-        return {**asdict(self), "success_a": self.success_a, "success_b": self.success_b,
-                "difference": self.difference}
+        return {**asdict(self), "success_a": self.success_a, "success_b": self.success_b, "difference": self.difference}
 
     def __str__(self) -> str:
-        return (f"{self.name_a} - {self.name_b}: {100 * self.difference:+.1f} points "
-                f"[{100 * self.ci_low:+.1f}, {100 * self.ci_high:+.1f}], McNemar p={self.p_value:.3g} "
-                f"(discordant {self.only_a}/{self.only_b}, n={self.episodes})")
+        return (
+            f"{self.name_a} - {self.name_b}: {100 * self.difference:+.1f} points "
+            f"[{100 * self.ci_low:+.1f}, {100 * self.ci_high:+.1f}], McNemar p={self.p_value:.3g} "
+            f"(discordant {self.only_a}/{self.only_b}, n={self.episodes})"
+        )
 
 
 def mcnemar_exact(only_a: int, only_b: int) -> float:
@@ -75,8 +76,9 @@ def mcnemar_exact(only_a: int, only_b: int) -> float:
     return float(binomtest(int(only_a), n, 0.5, alternative="two-sided").pvalue)
 
 
-def paired_difference_interval(both: int, only_a: int, only_b: int, neither: int,
-                               z: float = Z95) -> tuple[float, float]:
+def paired_difference_interval(
+    both: int, only_a: int, only_b: int, neither: int, z: float = Z95
+) -> tuple[float, float]:
     """Newcombe's (1998, method 10) interval for success(A) - success(B) on paired outcomes."""
     n = both + only_a + only_b + neither
     if n <= 0:
@@ -96,18 +98,22 @@ def paired_difference_interval(both: int, only_a: int, only_b: int, neither: int
     return max(-1.0, low), min(1.0, high)
 
 
-def compare_paired(success_a: Sequence[bool], success_b: Sequence[bool], name_a: str = "A",
-                   name_b: str = "B") -> PairedComparison:
+def compare_paired(
+    success_a: Sequence[bool], success_b: Sequence[bool], name_a: str = "A", name_b: str = "B"
+) -> PairedComparison:
     """Compare two policies from their per-episode outcomes on the same scenes (same order)."""
     a = np.asarray(success_a, dtype=bool).ravel()
     b = np.asarray(success_b, dtype=bool).ravel()
     if len(a) != len(b):
-        raise ConfigError(f"paired outcomes need equal lengths; got {len(a)} for {name_a} and {len(b)} for "
-                          f"{name_b}; evaluate both with the same --episodes and --seed")
+        raise ConfigError(
+            f"paired outcomes need equal lengths; got {len(a)} for {name_a} and {len(b)} for "
+            f"{name_b}; evaluate both with the same --episodes and --seed"
+        )
     if len(a) == 0:
         raise ConfigError("paired comparison needs at least one episode; got none")
     both, only_a = int(np.sum(a & b)), int(np.sum(a & ~b))
     only_b, neither = int(np.sum(~a & b)), int(np.sum(~a & ~b))
     lo, hi = paired_difference_interval(both, only_a, only_b, neither)
-    return PairedComparison(len(a), both, only_a, only_b, neither, mcnemar_exact(only_a, only_b), lo, hi,
-                            name_a, name_b)
+    return PairedComparison(
+        len(a), both, only_a, only_b, neither, mcnemar_exact(only_a, only_b), lo, hi, name_a, name_b
+    )

@@ -20,8 +20,14 @@ from .records import CurveRow, PerformanceMatrix, TierResults
 
 DPI = 150
 # one colour and line style per criterion's vertical line
-CHOICE_STYLE = {"best": ("black", "-"), "eval": ("tab:blue", "--"), "softopc": ("tab:red", ":"),
-                "auc": ("tab:purple", "-."), "td": ("tab:brown", (0, (5, 2, 1, 2))), "final": ("grey", (0, (1, 3)))}
+CHOICE_STYLE = {
+    "best": ("black", "-"),
+    "eval": ("tab:blue", "--"),
+    "softopc": ("tab:red", ":"),
+    "auc": ("tab:purple", "-."),
+    "td": ("tab:brown", (0, (5, 2, 1, 2))),
+    "final": ("grey", (0, (1, 3))),
+}
 OFFLINE_LABELS = {"softopc": "SoftOPC", "auc": "Q-ranking AUC", "td_error": "held-out TD error"}
 
 
@@ -56,9 +62,14 @@ def _use_log_x(steps: np.ndarray) -> bool:
     return len(pos) > 1 and pos.max() / pos.min() >= 100
 
 
-def plot_curve(rows: Sequence[CurveRow], path: Path, choices: Mapping[str, CriterionChoice] | None = None,
-               title: str = "Offline fine-tuning", references: Mapping[str, float] | None = None,
-               target_name: str = "target shift") -> Path:
+def plot_curve(
+    rows: Sequence[CurveRow],
+    path: Path,
+    choices: Mapping[str, CriterionChoice] | None = None,
+    title: str = "Offline fine-tuning",
+    references: Mapping[str, float] | None = None,
+    target_name: str = "target shift",
+) -> Path:
     """Success vs gradient steps with 95% bands; the base task shows forgetting; offline criteria below.
 
     Vertical lines mark the step each criterion chose; a dotted horizontal line
@@ -67,20 +78,24 @@ def plot_curve(rows: Sequence[CurveRow], path: Path, choices: Mapping[str, Crite
     rows = sorted(rows, key=lambda r: r.step)
     offline = [c for c in ("softopc", "auc", "td_error") if any(r.value(c) is not None for r in rows)]
     fig = _figure(7.5, 4.2 + 1.5 * len(offline))
-    axes = fig.subplots(1 + len(offline), 1, sharex=True, squeeze=False,
-                        gridspec_kw={"height_ratios": [3] + [1] * len(offline)})[:, 0]
+    axes = fig.subplots(
+        1 + len(offline), 1, sharex=True, squeeze=False, gridspec_kw={"height_ratios": [3] + [1] * len(offline)}
+    )[:, 0]
     ax = axes[0]
     steps_all = np.array([r.step for r in rows], dtype=float)
-    for which, colour, label in (("target", "tab:blue", f"fine-tuned policy on {target_name}"),
-                                 ("base", "tab:green", "fine-tuned policy on base task")):
+    for which, colour, label in (
+        ("target", "tab:blue", f"fine-tuned policy on {target_name}"),
+        ("base", "tab:green", "fine-tuned policy on base task"),
+    ):
         steps, mean, lo, hi = _series(rows, which)
         if len(steps):
             ax.plot(steps, mean, "o-", color=colour, ms=3, lw=1.5, label=label)
             ax.fill_between(steps, lo, hi, color=colour, alpha=0.18, lw=0)
     first = rows[0] if rows else None
     if first is not None and first.step == 0 and first.target is not None:
-        ax.axhline(100 * first.target.success_rate, color="goldenrod", ls=":", lw=1.5,
-                   label=f"base policy on {target_name}")
+        ax.axhline(
+            100 * first.target.success_rate, color="goldenrod", ls=":", lw=1.5, label=f"base policy on {target_name}"
+        )
     for i, (name, value) in enumerate((references or {}).items()):
         ax.axhline(100 * value, color=f"C{(i + 5) % 10}", ls=":", lw=1.5, label=name)
     for name, choice in (choices or {}).items():
@@ -122,8 +137,9 @@ def plot_matrix(matrix: PerformanceMatrix, path: Path, title: str = "Performance
             rate = matrix.rate(i, j)
             ci = rate.ci if rate is not None else None
             text = f"{v:.0f}" + (f"\n[{100 * ci[0]:.0f}-{100 * ci[1]:.0f}]" if ci else "")
-            ax.text(j, i, text, ha="center", va="center", fontsize=8 if ci else 10,
-                    color="black" if v > 60 else "white")
+            ax.text(
+                j, i, text, ha="center", va="center", fontsize=8 if ci else 10, color="black" if v > 60 else "white"
+            )
     ax.set_xticks(range(n_cols), [t.replace("_", " ") for t in matrix.tasks], rotation=30, ha="right", fontsize=8)
     ax.set_yticks(range(n_rows), [f"{i}: {s.replace('_', ' ')}" for i, s in enumerate(matrix.stages)], fontsize=8)
     ax.set_xlabel("evaluated on task")
@@ -132,8 +148,9 @@ def plot_matrix(matrix: PerformanceMatrix, path: Path, title: str = "Performance
     return _save(fig, path)
 
 
-def plot_tiers(tiers: TierResults, path: Path, title: str = "Sample efficiency",
-               shifts: Sequence[str] | None = None) -> Path:
+def plot_tiers(
+    tiers: TierResults, path: Path, title: str = "Sample efficiency", shifts: Sequence[str] | None = None
+) -> Path:
     """Success vs number of target attempts (log x) with 95% intervals, one line per shift (Fig. 5.6).
 
     The base policy (no target data) of each shift is a dashed line in the same colour.
@@ -148,10 +165,13 @@ def plot_tiers(tiers: TierResults, path: Path, title: str = "Sample efficiency",
         if pts:
             x = np.array([k for k, _ in pts], dtype=float) * 1.04 ** (i - (len(names) - 1) / 2)  # dodge error bars
             y = np.array([100 * v.success_rate for _, v in pts])
-            err = np.array([[100 * (v.success_rate - v.ci[0]), 100 * (v.ci[1] - v.success_rate)] if v.ci
-                            else [0.0, 0.0] for _, v in pts]).T.clip(min=0.0)  # 0% or 100%: rounding below 0
-            ax.errorbar(x, y, yerr=err, fmt="o-", color=colour, capsize=3, ms=4, lw=1.5,
-                        label=name.replace("_", " "))
+            err = np.array(
+                [
+                    [100 * (v.success_rate - v.ci[0]), 100 * (v.ci[1] - v.success_rate)] if v.ci else [0.0, 0.0]
+                    for _, v in pts
+                ]
+            ).T.clip(min=0.0)  # 0% or 100%: rounding below 0
+            ax.errorbar(x, y, yerr=err, fmt="o-", color=colour, capsize=3, ms=4, lw=1.5, label=name.replace("_", " "))
         if row.base is not None:
             ax.axhline(100 * row.base.success_rate, color=colour, ls="--", lw=1, alpha=0.7)
     ax.set_xscale("log")
@@ -166,4 +186,3 @@ def plot_tiers(tiers: TierResults, path: Path, title: str = "Sample efficiency",
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return _save(fig, path)
-

@@ -40,8 +40,20 @@ MATRIX_FORMAT = "nsl.continual-matrix"
 TIERS_FORMAT = "nsl.tiers"
 RECORD_VERSION = 1
 
-CURVE_COLUMNS = ("step", "target_success", "target_ci_low", "target_ci_high", "target_episodes",
-                 "base_success", "base_ci_low", "base_ci_high", "base_episodes", "softopc", "auc", "td_error")
+CURVE_COLUMNS = (
+    "step",
+    "target_success",
+    "target_ci_low",
+    "target_ci_high",
+    "target_episodes",
+    "base_success",
+    "base_ci_low",
+    "base_ci_high",
+    "base_episodes",
+    "softopc",
+    "auc",
+    "td_error",
+)
 OFFLINE_COLUMNS = ("softopc", "auc", "td_error")
 
 
@@ -101,8 +113,12 @@ class Rate:
 
     def to_dict(self) -> dict:
         ci = self.ci
-        return {"success_rate": self.success_rate, "episodes": self.episodes,
-                "ci_low": None if ci is None else ci[0], "ci_high": None if ci is None else ci[1]}
+        return {
+            "success_rate": self.success_rate,
+            "episodes": self.episodes,
+            "ci_low": None if ci is None else ci[0],
+            "ci_high": None if ci is None else ci[1],
+        }
 
     def percent(self, intervals: bool = True) -> str:
         """``63% [55-71]`` (or ``63%`` without a known episode count)."""
@@ -113,6 +129,7 @@ class Rate:
 
 
 # --- curve.csv ------------------------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class CurveRow:
@@ -137,8 +154,14 @@ class CurveRow:
         out: dict[str, Any] = {"step": self.step}
         for prefix, rate in (("target", self.target), ("base", self.base)):
             d = rate.to_dict() if rate is not None else {}
-            out.update({f"{prefix}_success": d.get("success_rate"), f"{prefix}_ci_low": d.get("ci_low"),
-                        f"{prefix}_ci_high": d.get("ci_high"), f"{prefix}_episodes": d.get("episodes")})
+            out.update(
+                {
+                    f"{prefix}_success": d.get("success_rate"),
+                    f"{prefix}_ci_low": d.get("ci_low"),
+                    f"{prefix}_ci_high": d.get("ci_high"),
+                    f"{prefix}_episodes": d.get("episodes"),
+                }
+            )
         out.update(softopc=self.softopc, auc=self.auc, td_error=self.td_error)
         return out
 
@@ -154,8 +177,14 @@ class CurveRow:
             n = _finite(d.get(f"{prefix}_episodes"))
             return Rate(v, None if n is None else int(n))
 
-        return cls(int(float(d["step"])), rate("target"), rate("base"), _finite(d.get("softopc")),
-                   _finite(d.get("auc")), _finite(d.get("td_error")))
+        return cls(
+            int(float(d["step"])),
+            rate("target"),
+            rate("base"),
+            _finite(d.get("softopc")),
+            _finite(d.get("auc")),
+            _finite(d.get("td_error")),
+        )
 
 
 def write_curve(path: Path, rows: Iterable[CurveRow]) -> None:
@@ -164,8 +193,12 @@ def write_curve(path: Path, rows: Iterable[CurveRow]) -> None:
     w.writerow(CURVE_COLUMNS)
     for row in sorted(rows, key=lambda r: r.step):
         d = row.to_dict()
-        w.writerow(["" if d[c] is None else repr(int(d[c]) if c.endswith(("step", "episodes")) else float(d[c]))
-                    for c in CURVE_COLUMNS])
+        w.writerow(
+            [
+                "" if d[c] is None else repr(int(d[c]) if c.endswith(("step", "episodes")) else float(d[c]))
+                for c in CURVE_COLUMNS
+            ]
+        )
     atomic_write_bytes(Path(path), buf.getvalue().encode())
 
 
@@ -175,8 +208,9 @@ def read_curve(path: Path) -> list[CurveRow]:
     with open(path, newline="") as f:
         reader = csv.DictReader(f)
         if not reader.fieldnames or "step" not in reader.fieldnames:
-            raise CorruptDataError(f"{path} has no 'step' column; a curve.csv starts with the header "
-                                   f"{','.join(CURVE_COLUMNS)}")
+            raise CorruptDataError(
+                f"{path} has no 'step' column; a curve.csv starts with the header {','.join(CURVE_COLUMNS)}"
+            )
         try:
             rows = [CurveRow.from_dict(r) for r in reader]
         except (ValueError, ConfigError) as e:
@@ -200,6 +234,7 @@ def read_eval_jsonl(path: Path) -> list[CurveRow]:
 
 
 # --- matrix.json ----------------------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class PerformanceMatrix:
@@ -225,8 +260,9 @@ class PerformanceMatrix:
         object.__setattr__(self, "stages", tuple(self.stages))
         object.__setattr__(self, "success", tuple(tuple(_finite(v) for v in row) for row in self.success))
         if self.episodes is not None:
-            object.__setattr__(self, "episodes", tuple(tuple(None if v is None else int(v) for v in row)
-                                                       for row in self.episodes))
+            object.__setattr__(
+                self, "episodes", tuple(tuple(None if v is None else int(v) for v in row) for row in self.episodes)
+            )
         if len(set(self.tasks)) != len(self.tasks) or not self.tasks:
             raise ConfigError(f"matrix tasks {list(self.tasks)} must be non-empty and unique")
         trained = self.stages[1:]
@@ -234,9 +270,13 @@ class PerformanceMatrix:
             raise ConfigError(f"matrix stages {list(trained)} repeat a task; each task is trained once")
         missing = [s for s in trained if s not in self.tasks]
         if missing:
-            raise ConfigError(f"stages {missing} are not among the matrix tasks {list(self.tasks)}; add them as columns")
+            raise ConfigError(
+                f"stages {missing} are not among the matrix tasks {list(self.tasks)}; add them as columns"
+            )
         if self.base_task is not None and self.base_task not in self.tasks:
-            raise ConfigError(f"base_task {self.base_task!r} is not a matrix task; use one of {list(self.tasks)} or None")
+            raise ConfigError(
+                f"base_task {self.base_task!r} is not a matrix task; use one of {list(self.tasks)} or None"
+            )
         if self.base_task in trained:
             raise ConfigError(f"base_task {self.base_task!r} cannot also be trained at a later stage")
         if len(self.success) != len(self.stages):
@@ -266,23 +306,48 @@ class PerformanceMatrix:
         old = self.episodes or tuple((None,) * len(self.tasks) for _ in self.success)
         counts = (*old, tuple(None if (r := rates.get(t)) is None else r.episodes for t in self.tasks))
         episodes = None if all(n is None for row in counts for n in row) else counts
-        return PerformanceMatrix(self.tasks, (*self.stages, stage), success, episodes, self.base_task, self.single,
-                                 self.reference, self.curves, self.reference_curves)
+        return PerformanceMatrix(
+            self.tasks,
+            (*self.stages, stage),
+            success,
+            episodes,
+            self.base_task,
+            self.single,
+            self.reference,
+            self.curves,
+            self.reference_curves,
+        )
 
     def to_dict(self) -> dict:
-        return {"format": MATRIX_FORMAT, "version": RECORD_VERSION, "tasks": list(self.tasks),
-                "stages": list(self.stages), "success": [list(r) for r in self.success],
-                "episodes": None if self.episodes is None else [list(r) for r in self.episodes],
-                "base_task": self.base_task, "single": None if self.single is None else dict(self.single),
-                "reference": None if self.reference is None else dict(self.reference),
-                "curves": self.curves, "reference_curves": self.reference_curves}
+        return {
+            "format": MATRIX_FORMAT,
+            "version": RECORD_VERSION,
+            "tasks": list(self.tasks),
+            "stages": list(self.stages),
+            "success": [list(r) for r in self.success],
+            "episodes": None if self.episodes is None else [list(r) for r in self.episodes],
+            "base_task": self.base_task,
+            "single": None if self.single is None else dict(self.single),
+            "reference": None if self.reference is None else dict(self.reference),
+            "curves": self.curves,
+            "reference_curves": self.reference_curves,
+        }
 
     @classmethod
     def from_dict(cls, d: Mapping) -> PerformanceMatrix:
         if d.get("format", MATRIX_FORMAT) != MATRIX_FORMAT:
             raise ConfigError(f"not a performance matrix (format {d.get('format')!r}, expected {MATRIX_FORMAT!r})")
-        return cls(d["tasks"], d["stages"], d["success"], d.get("episodes"), d.get("base_task", "base"),
-                   d.get("single"), d.get("reference"), d.get("curves"), d.get("reference_curves"))
+        return cls(
+            d["tasks"],
+            d["stages"],
+            d["success"],
+            d.get("episodes"),
+            d.get("base_task", "base"),
+            d.get("single"),
+            d.get("reference"),
+            d.get("curves"),
+            d.get("reference_curves"),
+        )
 
     def save(self, path: Path) -> None:
         atomic_write_json(Path(path), self.to_dict())
@@ -311,6 +376,7 @@ def _load(path: Path, parse, required: tuple[str, ...]):
 
 # --- tiers.json -----------------------------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class TierRow:
     """One challenge (shift): the base policy, each dataset tier, and comparison methods."""
@@ -320,14 +386,19 @@ class TierRow:
     comparisons: Mapping[str, Rate] | None = None  # e.g. {"scratch": ..., "imagenet": ...} (largest tier)
 
     def to_dict(self) -> dict:
-        return {"base": None if self.base is None else self.base.to_dict(),
-                "tiers": [{"attempts": k, **v.to_dict()} for k, v in sorted((self.tiers or {}).items())],
-                "comparisons": [{"name": k, **v.to_dict()} for k, v in (self.comparisons or {}).items()]}
+        return {
+            "base": None if self.base is None else self.base.to_dict(),
+            "tiers": [{"attempts": k, **v.to_dict()} for k, v in sorted((self.tiers or {}).items())],
+            "comparisons": [{"name": k, **v.to_dict()} for k, v in (self.comparisons or {}).items()],
+        }
 
     @classmethod
     def from_dict(cls, d: Mapping) -> TierRow:
-        return cls(Rate.of(d.get("base")), {int(t["attempts"]): Rate.of(t) for t in d.get("tiers") or []},
-                   {c["name"]: Rate.of(c) for c in d.get("comparisons") or []})
+        return cls(
+            Rate.of(d.get("base")),
+            {int(t["attempts"]): Rate.of(t) for t in d.get("tiers") or []},
+            {c["name"]: Rate.of(c) for c in d.get("comparisons") or []},
+        )
 
 
 @dataclass(frozen=True)
@@ -352,15 +423,18 @@ class TierResults:
         return names
 
     def to_dict(self) -> dict:
-        return {"format": TIERS_FORMAT, "version": RECORD_VERSION,
-                "rows": [{"shift": k, **v.to_dict()} for k, v in self.rows.items()]}
+        return {
+            "format": TIERS_FORMAT,
+            "version": RECORD_VERSION,
+            "rows": [{"shift": k, **v.to_dict()} for k, v in self.rows.items()],
+        }
 
     @classmethod
     def from_dict(cls, d: Mapping) -> TierResults:
         if d.get("format", TIERS_FORMAT) != TIERS_FORMAT:
             raise ConfigError(f"not a tiers record (format {d.get('format')!r}, expected {TIERS_FORMAT!r})")
         if not isinstance(d["rows"], list) or not all(isinstance(r, Mapping) for r in d["rows"]):
-            raise ConfigError("tiers 'rows' must be a list of {\"shift\", \"base\", \"tiers\", \"comparisons\"} objects")
+            raise ConfigError('tiers \'rows\' must be a list of {"shift", "base", "tiers", "comparisons"} objects')
         return cls({r["shift"]: TierRow.from_dict(r) for r in d["rows"]})
 
     def save(self, path: Path) -> None:

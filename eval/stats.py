@@ -30,8 +30,13 @@ class SuccessRate:
 
     def to_dict(self) -> dict:
         lo, hi = self.ci
-        return {"success_rate": self.success_rate, "ci_low": lo, "ci_high": hi, "episodes": self.episodes,
-                "successes": self.successes}
+        return {
+            "success_rate": self.success_rate,
+            "ci_low": lo,
+            "ci_high": hi,
+            "episodes": self.episodes,
+            "successes": self.successes,
+        }
 
     def __str__(self) -> str:
         lo, hi = self.ci

@@ -25,9 +25,19 @@ from nsl.lazy import lazy_exports
 
 _EXPORTS = {
     "cem": ("cem_maximize", "full_actions", "noise_from_generator", "noise_from_rngs"),
-    "checkpoint": ("CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "CONFIG_FILE", "MODEL_FILE", "TRAINER_FILE",
-                   "Checkpoint", "checkpoint_config", "checkpoint_id", "load_checkpoint", "read_config",
-                   "save_checkpoint"),
+    "checkpoint": (
+        "CHECKPOINT_FORMAT",
+        "CHECKPOINT_VERSION",
+        "CONFIG_FILE",
+        "MODEL_FILE",
+        "TRAINER_FILE",
+        "Checkpoint",
+        "checkpoint_config",
+        "checkpoint_id",
+        "load_checkpoint",
+        "read_config",
+        "save_checkpoint",
+    ),
     "config": ("FINE_TUNE_CONSERVATIVE", "FINE_TUNE_STEPS", "METHODS", "CemConfig", "NetConfig", "TrainConfig"),
     "networks": ("QNetwork",),
     "policy": ("CEMPolicy", "load_policy"),
@@ -40,11 +50,20 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 
 if TYPE_CHECKING:  # static analysers see the eager imports
     from .cem import cem_maximize, full_actions, noise_from_generator, noise_from_rngs  # noqa: F401
-    from .checkpoint import (CHECKPOINT_FORMAT, CHECKPOINT_VERSION, CONFIG_FILE, MODEL_FILE,  # noqa: F401
-                             TRAINER_FILE, Checkpoint, checkpoint_config, checkpoint_id, load_checkpoint,
-                             read_config, save_checkpoint)
-    from .config import (FINE_TUNE_CONSERVATIVE, FINE_TUNE_STEPS, METHODS, CemConfig, NetConfig,  # noqa: F401
-                         TrainConfig)
+    from .checkpoint import (  # noqa: F401
+        CHECKPOINT_FORMAT,
+        CHECKPOINT_VERSION,
+        CONFIG_FILE,
+        MODEL_FILE,
+        TRAINER_FILE,
+        Checkpoint,
+        checkpoint_config,
+        checkpoint_id,
+        load_checkpoint,
+        read_config,
+        save_checkpoint,
+    )
+    from .config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_STEPS, METHODS, CemConfig, NetConfig, TrainConfig  # noqa: F401
     from .networks import QNetwork  # noqa: F401
     from .policy import CEMPolicy, load_policy  # noqa: F401
     from .qtopt import Learner, bellman_target, update  # noqa: F401

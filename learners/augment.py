@@ -50,8 +50,9 @@ def colour_jitter(x: torch.Tensor, strength: float, generator: torch.Generator) 
     return torch.addcmul(offset.view(b, c, 1, 1), x, scale.view(b, c, 1, 1)).clamp_(0.0, 1.0)
 
 
-def prepare_images(images: torch.Tensor, crop: int, colour: float, generator: torch.Generator | None,
-                   channels_last: bool = True) -> torch.Tensor:
+def prepare_images(
+    images: torch.Tensor, crop: int, colour: float, generator: torch.Generator | None, channels_last: bool = True
+) -> torch.Tensor:
     """uint8 (B, H, W, 3) -> augmented float (B, 3, H, W); no augmentation without a generator.
 
     Element-wise work runs on a contiguous NCHW copy (broadcasting over

@@ -37,8 +37,9 @@ def noise_from_rngs(rngs: Sequence[np.random.Generator], dims: int, cfg: CemConf
     return torch.from_numpy(np.stack(per)) if per else torch.zeros(noise_shape(0, dims, cfg))
 
 
-def cem_maximize(score: Callable[[torch.Tensor], torch.Tensor], noise: torch.Tensor,
-                 cfg: CemConfig) -> tuple[torch.Tensor, torch.Tensor]:
+def cem_maximize(
+    score: Callable[[torch.Tensor], torch.Tensor], noise: torch.Tensor, cfg: CemConfig
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Maximise ``score`` over actions in [-1, 1]^A for a batch of B states.
 
     ``score`` maps candidates (B, N, A) to scores (B, N); ``noise`` is

@@ -69,8 +69,9 @@ class Checkpoint:
         return checkpoint_id(self.path)
 
 
-def checkpoint_config(net: QNetwork, *, training: TrainConfig, method: str, data: dict[str, Any],
-                      parent: dict[str, Any] | None, step: int) -> dict[str, Any]:
+def checkpoint_config(
+    net: QNetwork, *, training: TrainConfig, method: str, data: dict[str, Any], parent: dict[str, Any] | None, step: int
+) -> dict[str, Any]:
     """The ``config.json`` of a checkpoint (``training.lr`` must be the resolved learning rate)."""
     return {
         "format": CHECKPOINT_FORMAT,
@@ -88,8 +89,10 @@ def checkpoint_config(net: QNetwork, *, training: TrainConfig, method: str, data
 def save_checkpoint(path: Path, net: QNetwork, config: dict[str, Any], trainer_state: dict | None = None) -> Path:
     """Write a checkpoint folder at ``path`` atomically (replacing one already there)."""
     weights = {k: v.detach().contiguous() for k, v in net.state_dict().items()}
-    files: dict[str, bytes] = {MODEL_FILE: safetensors.torch.save(weights, metadata={"format": CHECKPOINT_FORMAT}),
-                               CONFIG_FILE: fmt.encode_config(config)}
+    files: dict[str, bytes] = {
+        MODEL_FILE: safetensors.torch.save(weights, metadata={"format": CHECKPOINT_FORMAT}),
+        CONFIG_FILE: fmt.encode_config(config),
+    }
     if trainer_state is not None:
         buf = io.BytesIO()
         torch.save(trainer_state, buf)
@@ -104,14 +107,18 @@ def read_config(path: Path) -> dict[str, Any]:
     config = fmt.read_config(path)
     missing = [k for k in REQUIRED_KEYS if k not in config]
     if missing:
-        raise CorruptDataError(f"checkpoint {path}: {CONFIG_FILE} lacks key(s) {missing}; it is incomplete or from "
-                               "another tool, so its weights cannot be interpreted")
+        raise CorruptDataError(
+            f"checkpoint {path}: {CONFIG_FILE} lacks key(s) {missing}; it is incomplete or from "
+            "another tool, so its weights cannot be interpreted"
+        )
     if config["format"] != CHECKPOINT_FORMAT:
         raise CorruptDataError(f"checkpoint {path}: format {config['format']!r} is not {CHECKPOINT_FORMAT!r}")
     version = config["version"]
     if not isinstance(version, int) or version > CHECKPOINT_VERSION or version < 1:
-        raise IncompatibleVersionError(f"checkpoint {path} has format version {version!r}; this nsl "
-                                       f"({__version__}) reads version {CHECKPOINT_VERSION}; use a matching nsl")
+        raise IncompatibleVersionError(
+            f"checkpoint {path} has format version {version!r}; this nsl "
+            f"({__version__}) reads version {CHECKPOINT_VERSION}; use a matching nsl"
+        )
     for section, parse in (("architecture", NetConfig.from_dict), ("training", TrainConfig.from_dict)):
         if not isinstance(config[section], dict):
             raise CorruptDataError(f"checkpoint {path}: {CONFIG_FILE} '{section}' must be an object")
@@ -133,17 +140,23 @@ def load_checkpoint(path: Path) -> Checkpoint:
     try:
         weights = safetensors.torch.load(model_file.read_bytes())
     except Exception as e:  # safetensors raises its own error types for truncated or altered files
-        raise CorruptDataError(f"checkpoint {path}: {MODEL_FILE} cannot be read ({e}); it is truncated or altered") from None
+        raise CorruptDataError(
+            f"checkpoint {path}: {MODEL_FILE} cannot be read ({e}); it is truncated or altered"
+        ) from None
     expected = net.state_dict()
     missing, extra = sorted(set(expected) - set(weights)), sorted(set(weights) - set(expected))
     if missing or extra:
-        raise CorruptDataError(f"checkpoint {path}: weights do not match the architecture in {CONFIG_FILE} "
-                               f"(missing {missing[:3]}{'...' if len(missing) > 3 else ''}, "
-                               f"unexpected {extra[:3]}{'...' if len(extra) > 3 else ''})")
+        raise CorruptDataError(
+            f"checkpoint {path}: weights do not match the architecture in {CONFIG_FILE} "
+            f"(missing {missing[:3]}{'...' if len(missing) > 3 else ''}, "
+            f"unexpected {extra[:3]}{'...' if len(extra) > 3 else ''})"
+        )
     for name, t in expected.items():
         if tuple(weights[name].shape) != tuple(t.shape):
-            raise CorruptDataError(f"checkpoint {path}: tensor {name} has shape {tuple(weights[name].shape)} but the "
-                                   f"architecture in {CONFIG_FILE} needs {tuple(t.shape)}")
+            raise CorruptDataError(
+                f"checkpoint {path}: tensor {name} has shape {tuple(weights[name].shape)} but the "
+                f"architecture in {CONFIG_FILE} needs {tuple(t.shape)}"
+            )
     net.load_state_dict(weights)
     net.eval()
     return Checkpoint(path, net, config)
@@ -157,8 +170,10 @@ def load_trainer_state(path: Path) -> dict | None:
     try:
         return torch.load(io.BytesIO(f.read_bytes()), weights_only=True)
     except Exception as e:
-        raise CorruptDataError(f"checkpoint {path}: {TRAINER_FILE} cannot be read ({e}); delete this checkpoint "
-                               "folder to resume from the one before") from None
+        raise CorruptDataError(
+            f"checkpoint {path}: {TRAINER_FILE} cannot be read ({e}); delete this checkpoint "
+            "folder to resume from the one before"
+        ) from None
 
 
 def checkpoint_id(path: Path) -> str:

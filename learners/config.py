@@ -59,11 +59,15 @@ class NetConfig:
         if not isinstance(self.image_size, int) or not 16 <= self.image_size <= 256:
             raise ConfigError(f"net.image_size {self.image_size!r} is out of range; use 16..256 (64 is standard)")
         if not self.conv_channels or len(self.conv_channels) != len(self.conv_strides):
-            raise ConfigError(f"net.conv_channels {self.conv_channels} and net.conv_strides {self.conv_strides} "
-                              "must be non-empty and of equal length (one entry per conv layer)")
+            raise ConfigError(
+                f"net.conv_channels {self.conv_channels} and net.conv_strides {self.conv_strides} "
+                "must be non-empty and of equal length (one entry per conv layer)"
+            )
         if any(c < 1 for c in self.conv_channels) or any(s not in (1, 2) for s in self.conv_strides):
-            raise ConfigError(f"net.conv_channels {self.conv_channels} must be positive and "
-                              f"net.conv_strides {self.conv_strides} each 1 or 2")
+            raise ConfigError(
+                f"net.conv_channels {self.conv_channels} must be positive and "
+                f"net.conv_strides {self.conv_strides} each 1 or 2"
+            )
         if self.norm not in NORMS:
             raise ConfigError(f"net.norm {self.norm!r} is unknown; use one of {NORMS}")
         if self.pool not in POOLS:
@@ -71,23 +75,32 @@ class NetConfig:
         if self.hidden < 1 or self.head_layers < 1:
             raise ConfigError(f"net.hidden {self.hidden} and net.head_layers {self.head_layers} must be at least 1")
         dims = self.action_dims
-        if not dims or len(set(dims)) != len(dims) or any(not 0 <= d < ACTION_DIM for d in dims) or list(dims) != sorted(dims):
-            raise ConfigError(f"net.action_dims {dims} must be distinct increasing indices in 0..{ACTION_DIM - 1} "
-                              "(0 dx, 1 dy, 2 dz, 3 dyaw, 4 close, 5 terminate)")
+        if (
+            not dims
+            or len(set(dims)) != len(dims)
+            or any(not 0 <= d < ACTION_DIM for d in dims)
+            or list(dims) != sorted(dims)
+        ):
+            raise ConfigError(
+                f"net.action_dims {dims} must be distinct increasing indices in 0..{ACTION_DIM - 1} "
+                "(0 dx, 1 dy, 2 dz, 3 dyaw, 4 close, 5 terminate)"
+            )
         if len(self.default_action) != ACTION_DIM or any(not -1.0 <= v <= 1.0 for v in self.default_action):
             raise ConfigError(f"net.default_action {self.default_action} must hold {ACTION_DIM} values in [-1, 1]")
         if self.state_dim < 1:
             raise ConfigError(f"net.state_dim {self.state_dim} must be at least 1")
         if self.pool == "spatial" and self.columns > 1:
-            raise ConfigError("net.pool 'spatial' has no progressive-network laterals yet; use pool 'flatten' "
-                              "for the pnn and ft_pnn methods")
+            raise ConfigError(
+                "net.pool 'spatial' has no progressive-network laterals yet; use pool 'flatten' "
+                "for the pnn and ft_pnn methods"
+            )
         if self.columns < 1:
             raise ConfigError(f"net.columns {self.columns} must be at least 1")
 
     @property
     def feature_dim(self) -> int:
         """Length of the trunk's output vector."""
-        return self.conv_channels[-1] * (self.feature_size ** 2 if self.pool == "flatten" else 1)
+        return self.conv_channels[-1] * (self.feature_size**2 if self.pool == "flatten" else 1)
 
     @property
     def feature_size(self) -> int:
@@ -138,7 +151,9 @@ class TrainConfig:
     steps: int = 20_000  # gradient steps (the run's total, also after a resume)
     batch_size: int = 64
     lr: float | None = None  # None: 3e-4 from scratch, 25% of the parent's learning rate when fine-tuning
-    lr_decay: int = 0  # cosine decay of the learning rate to lr_floor * lr over this many steps, then flat; 0 = constant
+    lr_decay: int = (
+        0  # cosine decay of the learning rate to lr_floor * lr over this many steps, then flat; 0 = constant
+    )
     lr_floor: float = 0.05  # the decayed learning rate as a fraction of lr
     weight_decay: float = 0.0
     grad_clip: float = 10.0  # max gradient norm; 0 disables clipping
@@ -170,24 +185,35 @@ class TrainConfig:
         if not 0 <= self.gamma <= 1 or not 0 <= self.polyak < 1:
             raise ConfigError(f"gamma {self.gamma} must be in [0, 1] and polyak {self.polyak} in [0, 1)")
         if self.lr_decay < 0 or not 0 <= self.lr_floor <= 1:
-            raise ConfigError(f"lr_decay {self.lr_decay} must be >= 0 (0 = constant) and lr_floor {self.lr_floor} "
-                              "in [0, 1]")
+            raise ConfigError(
+                f"lr_decay {self.lr_decay} must be >= 0 (0 = constant) and lr_floor {self.lr_floor} in [0, 1]"
+            )
         if self.n_step < 1:
             raise ConfigError(f"n_step {self.n_step} must be at least 1 (1 = one-step QT-Opt)")
         if self.lag_period < 1 or self.log_every < 1 or self.checkpoint_every < 1 or self.eval_every < 0:
-            raise ConfigError("lag_period, log_every and checkpoint_every must be >= 1 and eval_every >= 0 "
-                              f"(got {self.lag_period}, {self.log_every}, {self.checkpoint_every}, {self.eval_every})")
+            raise ConfigError(
+                "lag_period, log_every and checkpoint_every must be >= 1 and eval_every >= 0 "
+                f"(got {self.lag_period}, {self.log_every}, {self.checkpoint_every}, {self.eval_every})"
+            )
         if self.augment_crop < 0 or self.augment_colour < 0 or self.grad_clip < 0 or self.weight_decay < 0:
             raise ConfigError("augment_crop, augment_colour, grad_clip and weight_decay must be non-negative")
         if (self.conservative is not None and self.conservative < 0) or self.conservative_samples < 1:
-            raise ConfigError(f"conservative {self.conservative} must be >= 0 and conservative_samples "
-                              f"{self.conservative_samples} >= 1")
+            raise ConfigError(
+                f"conservative {self.conservative} must be >= 0 and conservative_samples "
+                f"{self.conservative_samples} >= 1"
+            )
         if self.shrink_perturb is not None:
             sp = _tuple(self.shrink_perturb)
-            if (not isinstance(sp, tuple) or len(sp) != 2 or not all(isinstance(v, (int, float)) for v in sp)
-                    or not 0 < sp[0] <= 1 or sp[1] < 0):
-                raise ConfigError(f"shrink_perturb {sp!r} must be (alpha, sigma) with 0 < alpha <= 1 and sigma >= 0, "
-                                  "e.g. (0.8, 0.01)")
+            if (
+                not isinstance(sp, tuple)
+                or len(sp) != 2
+                or not all(isinstance(v, (int, float)) for v in sp)
+                or not 0 < sp[0] <= 1
+                or sp[1] < 0
+            ):
+                raise ConfigError(
+                    f"shrink_perturb {sp!r} must be (alpha, sigma) with 0 < alpha <= 1 and sigma >= 0, e.g. (0.8, 0.01)"
+                )
             object.__setattr__(self, "shrink_perturb", (float(sp[0]), float(sp[1])))
         if self.keep_trainer_state < 1:
             raise ConfigError(f"keep_trainer_state {self.keep_trainer_state} must be at least 1 (resume needs one)")

@@ -37,8 +37,17 @@ from .config import NetConfig
 
 # A column's head: every layer after the conv trunk, including the laterals into it.  The order is the order in
 # which ``new_head`` re-draws them (it fixes which random numbers each layer gets).
-HEAD_PREFIXES = ("state_fc", "action_fc", "hidden_fcs", "out", "state_proj", "spatial_fc",
-                 "lateral.state", "lateral.hidden", "lateral.out")
+HEAD_PREFIXES = (
+    "state_fc",
+    "action_fc",
+    "hidden_fcs",
+    "out",
+    "state_proj",
+    "spatial_fc",
+    "lateral.state",
+    "lateral.hidden",
+    "lateral.out",
+)
 
 
 def coordinate_planes(n: int) -> torch.Tensor:
@@ -48,7 +57,7 @@ def coordinate_planes(n: int) -> torch.Tensor:
 
 
 class QColumn(nn.Module):
-    """One column: conv trunk, per-state context, per-candidate head, and laterals from ``n_lateral`` earlier columns."""
+    """One column: conv trunk, per-state context, per-candidate head, laterals from ``n_lateral`` earlier columns."""
 
     coords: torch.Tensor  # a buffer, registered with pool "spatial"
 
@@ -196,8 +205,11 @@ def is_head_parameter(name: str) -> bool:
 def reinit_head(net: QNetwork) -> None:
     """Re-initialise the last column's head (``new_head``): every layer :func:`is_head_parameter` names."""
     col = net.columns[-1]
-    layers = [(rank, m) for name, m in col.named_modules()
-              if hasattr(m, "reset_parameters") and (rank := head_rank(name)) is not None]
+    layers = [
+        (rank, m)
+        for name, m in col.named_modules()
+        if hasattr(m, "reset_parameters") and (rank := head_rank(name)) is not None
+    ]
     for _, m in sorted(layers, key=lambda item: item[0]):  # stable: a layer's parts keep their order
         m.reset_parameters()
 

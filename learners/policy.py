@@ -48,13 +48,22 @@ class CEMPolicy:
 
     needs_privileged = False
 
-    def __init__(self, net: QNetwork, cem: CemConfig | None = None, epsilon: float = 0.0, name: str = "cem",
-                 info: dict[str, Any] | None = None, action_noise: float = 0.0):
+    def __init__(
+        self,
+        net: QNetwork,
+        cem: CemConfig | None = None,
+        epsilon: float = 0.0,
+        name: str = "cem",
+        info: dict[str, Any] | None = None,
+        action_noise: float = 0.0,
+    ):
         if not 0.0 <= epsilon <= 1.0:
             raise ConfigError(f"epsilon {epsilon!r} is out of range; use 0..1 (e.g. 0.1 for exploration)")
         if not 0.0 <= action_noise <= 2.0:
-            raise ConfigError(f"action_noise {action_noise!r} is out of range; use a standard deviation in 0..2 "
-                              "action units (e.g. 0.3)")
+            raise ConfigError(
+                f"action_noise {action_noise!r} is out of range; use a standard deviation in 0..2 "
+                "action units (e.g. 0.3)"
+            )
         self.net = net.eval()
         self.cem = cem or CemConfig()
         self.epsilon = float(epsilon)
@@ -73,7 +82,9 @@ class CEMPolicy:
         image = np.asarray(obs["image"])
         n = self.net.cfg.image_size
         if image.dtype != np.uint8 or image.ndim != 4 or image.shape[1:] != (n, n, 3):
-            raise ConfigError(f"policy {self.name}: images must be uint8 (B, {n}, {n}, 3); got {image.dtype} {image.shape}")
+            raise ConfigError(
+                f"policy {self.name}: images must be uint8 (B, {n}, {n}, 3); got {image.dtype} {image.shape}"
+            )
         return to_float(torch.from_numpy(image)), torch.from_numpy(np.asarray(obs["state"], np.float32))
 
     def greedy(self, obs: dict[str, np.ndarray], rngs: list[np.random.Generator]) -> tuple[np.ndarray, np.ndarray]:
@@ -91,13 +102,14 @@ class CEMPolicy:
         best, logits = np.zeros((len(image), dims), np.float32), np.zeros(len(image), np.float32)
         with torch.inference_mode():
             for i in range(len(image)):
-                ctx = self.net.encode(image[i:i + 1], state[i:i + 1])
-                b, s = cem_maximize(functools.partial(self.net.score, ctx), noise[i:i + 1], self.cem)
+                ctx = self.net.encode(image[i : i + 1], state[i : i + 1])
+                b, s = cem_maximize(functools.partial(self.net.score, ctx), noise[i : i + 1], self.cem)
                 best[i], logits[i] = b[0].numpy(), s[0].item()
         return best, logits
 
-    def __call__(self, obs: dict[str, np.ndarray], *, rngs: list[np.random.Generator],
-                 privileged: list[dict] | None = None) -> np.ndarray:
+    def __call__(
+        self, obs: dict[str, np.ndarray], *, rngs: list[np.random.Generator], privileged: list[dict] | None = None
+    ) -> np.ndarray:
         active, _ = self.greedy(obs, rngs)
         dims = len(self.net.cfg.action_dims)
         if self.action_noise > 0:
@@ -112,12 +124,19 @@ class CEMPolicy:
 
     def describe(self) -> dict[str, Any]:
         noise = {"action_noise": self.action_noise} if self.action_noise > 0 else {}  # absent at 0: old hashes hold
-        return {"policy": "cem", "name": self.name, "cem": self.cem.to_dict(), "epsilon": self.epsilon, **noise,
-                **self.info}
+        return {
+            "policy": "cem",
+            "name": self.name,
+            "cem": self.cem.to_dict(),
+            "epsilon": self.epsilon,
+            **noise,
+            **self.info,
+        }
 
 
-def load_policy(checkpoint_dir: str | Path, epsilon: float = 0.0, action_noise: float = 0.0,
-                **cem_overrides: Any) -> CEMPolicy:
+def load_policy(
+    checkpoint_dir: str | Path, epsilon: float = 0.0, action_noise: float = 0.0, **cem_overrides: Any
+) -> CEMPolicy:
     """A :class:`CEMPolicy` from a checkpoint folder; CEM settings default to the checkpoint's training ones."""
     ckpt = load_checkpoint(Path(checkpoint_dir))
     cem = TrainConfig.from_dict(ckpt.config["training"]).cem

@@ -60,9 +60,13 @@ class Learner:
         return cls(net, clone_frozen(net), clone_frozen(net), opt, gen)
 
     def state_dict(self) -> dict:
-        return {"online": self.online.state_dict(), "polyak": self.polyak.state_dict(),
-                "lagged": self.lagged.state_dict(), "optimizer": self.optimizer.state_dict(),
-                "generator": self.generator.get_state()}
+        return {
+            "online": self.online.state_dict(),
+            "polyak": self.polyak.state_dict(),
+            "lagged": self.lagged.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "generator": self.generator.get_state(),
+        }
 
     def load_state_dict(self, state: dict) -> None:
         self.online.load_state_dict(state["online"])
@@ -72,9 +76,17 @@ class Learner:
         self.generator.set_state(state["generator"])
 
 
-def bellman_target(polyak: QNetwork, lagged: QNetwork, next_image: torch.Tensor, next_state: torch.Tensor,
-                   reward: torch.Tensor, done: torch.Tensor, gamma: float | torch.Tensor, cem: CemConfig,
-                   noise: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def bellman_target(
+    polyak: QNetwork,
+    lagged: QNetwork,
+    next_image: torch.Tensor,
+    next_state: torch.Tensor,
+    reward: torch.Tensor,
+    done: torch.Tensor,
+    gamma: float | torch.Tensor,
+    cem: CemConfig,
+    noise: torch.Tensor,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Clipped double-Q targets (B,) and the next-state values (B,) (0 where ``done``).
 
     ``gamma`` is a number or a per-transition (B,) discount (n-step batches).
@@ -109,8 +121,17 @@ def update(learner: Learner, batch: dict[str, torch.Tensor], cfg: TrainConfig, s
     noise = noise_from_generator(len(reward), action.shape[1], cfg.cem, gen)
 
     with torch.no_grad():
-        target, next_value = bellman_target(learner.polyak, learner.lagged, next_image, batch[keys.NEXT_OBS_STATE],
-                                            reward, done, batch.get(keys.DISCOUNT, cfg.gamma), cfg.cem, noise)
+        target, next_value = bellman_target(
+            learner.polyak,
+            learner.lagged,
+            next_image,
+            batch[keys.NEXT_OBS_STATE],
+            reward,
+            done,
+            batch.get(keys.DISCOUNT, cfg.gamma),
+            cfg.cem,
+            noise,
+        )
 
     alpha = cfg.conservative or 0.0  # None (unresolved, outside train()) is plain QT-Opt
     if alpha > 0:
@@ -137,11 +158,28 @@ def update(learner: Learner, batch: dict[str, torch.Tensor], cfg: TrainConfig, s
 
     q = torch.sigmoid(logits.detach())
     live = done < 0.5
-    stats = torch.stack([
-        td_loss.detach(), conservative.detach(), grad_norm, q.mean(), q.min(), q.max(), target.mean(),
-        next_value[live].mean() if live.any() else next_value.new_tensor(0.0),
-    ]).tolist()
-    names = ["losses/q_loss", "losses/conservative", "losses/grad_norm", "q/mean", "q/min", "q/max", "q/target_mean", "q/next_value_mean"]
+    stats = torch.stack(
+        [
+            td_loss.detach(),
+            conservative.detach(),
+            grad_norm,
+            q.mean(),
+            q.min(),
+            q.max(),
+            target.mean(),
+            next_value[live].mean() if live.any() else next_value.new_tensor(0.0),
+        ]
+    ).tolist()
+    names = [
+        "losses/q_loss",
+        "losses/conservative",
+        "losses/grad_norm",
+        "q/mean",
+        "q/min",
+        "q/max",
+        "q/target_mean",
+        "q/next_value_mean",
+    ]
     return dict(zip(names, stats))
 
 

@@ -28,8 +28,15 @@ import numpy as np
 from nsl import keys
 from nsl.errors import ConfigError
 
-BATCH_KEYS = (keys.OBS_IMAGE, keys.OBS_STATE, keys.ACTION, keys.REWARD, keys.DONE,
-              keys.NEXT_OBS_IMAGE, keys.NEXT_OBS_STATE)
+BATCH_KEYS = (
+    keys.OBS_IMAGE,
+    keys.OBS_STATE,
+    keys.ACTION,
+    keys.REWARD,
+    keys.DONE,
+    keys.NEXT_OBS_IMAGE,
+    keys.NEXT_OBS_STATE,
+)
 
 
 class Sampler(Protocol):
@@ -48,15 +55,29 @@ class ArraySampler:
     transition, whose next state is never used).
     """
 
-    def __init__(self, images: np.ndarray, states: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
-                 dones: np.ndarray, next_index: np.ndarray, name: str = "arrays", valid: np.ndarray | None = None):
+    def __init__(
+        self,
+        images: np.ndarray,
+        states: np.ndarray,
+        actions: np.ndarray,
+        rewards: np.ndarray,
+        dones: np.ndarray,
+        next_index: np.ndarray,
+        name: str = "arrays",
+        valid: np.ndarray | None = None,
+    ):
         n = len(images)
         if images.ndim != 4 or images.shape[3] != 3 or images.dtype != np.uint8:
             raise ConfigError(f"images must be uint8 (N, H, W, 3); got {images.dtype} {images.shape}")
         if states.ndim != 2:
             raise ConfigError(f"states must be (N, state_dim); got {states.shape}")
-        for label, arr, shape in (("states", states, (n, states.shape[1])), ("actions", actions, (n, keys.ACTION_DIM)), ("rewards", rewards, (n,)),
-                                  ("dones", dones, (n,)), ("next_index", next_index, (n,))):
+        for label, arr, shape in (
+            ("states", states, (n, states.shape[1])),
+            ("actions", actions, (n, keys.ACTION_DIM)),
+            ("rewards", rewards, (n,)),
+            ("dones", dones, (n,)),
+            ("next_index", next_index, (n,)),
+        ):
             if arr.shape != shape:
                 raise ConfigError(f"{label} has shape {arr.shape}; expected {shape} to match {n} images")
         if n == 0 or next_index.min() < 0 or next_index.max() >= n:
@@ -79,13 +100,16 @@ class ArraySampler:
         if missing:
             raise ConfigError(f"transition arrays lack key(s) {missing}; need {list(BATCH_KEYS)}")
         n = len(batch[keys.OBS_IMAGE])
-        return cls(np.concatenate([batch[keys.OBS_IMAGE], batch[keys.NEXT_OBS_IMAGE]]),
-                   np.concatenate([batch[keys.OBS_STATE], batch[keys.NEXT_OBS_STATE]]),
-                   np.concatenate([batch[keys.ACTION], np.zeros_like(batch[keys.ACTION])]),
-                   np.concatenate([batch[keys.REWARD], np.zeros_like(batch[keys.REWARD])]),
-                   np.concatenate([batch[keys.DONE], np.ones_like(batch[keys.DONE])]),
-                   np.concatenate([np.arange(n) + n, np.arange(n) + n]),
-                   name=name, valid=np.arange(2 * n) < n)
+        return cls(
+            np.concatenate([batch[keys.OBS_IMAGE], batch[keys.NEXT_OBS_IMAGE]]),
+            np.concatenate([batch[keys.OBS_STATE], batch[keys.NEXT_OBS_STATE]]),
+            np.concatenate([batch[keys.ACTION], np.zeros_like(batch[keys.ACTION])]),
+            np.concatenate([batch[keys.REWARD], np.zeros_like(batch[keys.REWARD])]),
+            np.concatenate([batch[keys.DONE], np.ones_like(batch[keys.DONE])]),
+            np.concatenate([np.arange(n) + n, np.arange(n) + n]),
+            name=name,
+            valid=np.arange(2 * n) < n,
+        )
 
     @classmethod
     def from_episodes(cls, episodes: Iterable[Any], name: str = "episodes") -> ArraySampler:
@@ -110,8 +134,16 @@ class ArraySampler:
             start += t
         if not imgs:
             raise ConfigError("no episodes given to ArraySampler.from_episodes")
-        return cls(np.concatenate(imgs), np.concatenate(sts), np.concatenate(acts), np.concatenate(rews),
-                   np.concatenate(dones), np.concatenate(nxt), name=name, valid=np.concatenate(valid))
+        return cls(
+            np.concatenate(imgs),
+            np.concatenate(sts),
+            np.concatenate(acts),
+            np.concatenate(rews),
+            np.concatenate(dones),
+            np.concatenate(nxt),
+            name=name,
+            valid=np.concatenate(valid),
+        )
 
     def __len__(self) -> int:
         return len(self.indices)
@@ -119,11 +151,26 @@ class ArraySampler:
     def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
         i = self.indices[rng.integers(0, len(self.indices), size=batch_size)]
         j = self.next_index[i]
-        return {keys.OBS_IMAGE: self.images[i], keys.OBS_STATE: self.states[i], keys.ACTION: self.actions[i],
-                keys.REWARD: self.rewards[i], keys.DONE: self.dones[i],
-                keys.NEXT_OBS_IMAGE: self.images[j], keys.NEXT_OBS_STATE: self.states[j]}
+        return {
+            keys.OBS_IMAGE: self.images[i],
+            keys.OBS_STATE: self.states[i],
+            keys.ACTION: self.actions[i],
+            keys.REWARD: self.rewards[i],
+            keys.DONE: self.dones[i],
+            keys.NEXT_OBS_IMAGE: self.images[j],
+            keys.NEXT_OBS_STATE: self.states[j],
+        }
 
     def describe(self) -> dict[str, Any]:
         rewarded = float(self.rewards[self.indices].sum())
-        return {"sources": [{"name": self.name, "kind": "arrays", "transitions": len(self.indices),
-                             "rewards": rewarded, "weight": 1.0}]}
+        return {
+            "sources": [
+                {
+                    "name": self.name,
+                    "kind": "arrays",
+                    "transitions": len(self.indices),
+                    "rewards": rewarded,
+                    "weight": 1.0,
+                }
+            ]
+        }

@@ -42,13 +42,22 @@ from typing import Any
 
 import numpy as np
 import torch
-from nsl.progress import progress_bar
 
 from nsl.errors import ConfigError
+from nsl.progress import progress_bar
 from nsl.workspace import atomic_write_bytes
 
-from .checkpoint import (Checkpoint, checkpoint_config, checkpoint_id, load_checkpoint, load_trainer_state,
-                         read_config, save_checkpoint, write_json, TRAINER_FILE)
+from .checkpoint import (
+    TRAINER_FILE,
+    Checkpoint,
+    checkpoint_config,
+    checkpoint_id,
+    load_checkpoint,
+    load_trainer_state,
+    read_config,
+    save_checkpoint,
+    write_json,
+)
 from .config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_LR_FACTOR, METHODS, NetConfig, TrainConfig
 from .networks import QNetwork, grow_column, reinit_head, shrink_perturb
 from .policy import CEMPolicy
@@ -126,9 +135,17 @@ def initial_network(method: str, parent: Checkpoint | None, net: NetConfig | Non
     return grow_column(base, copy_last=(method == "ft_pnn")).train()
 
 
-def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_checkpoint: str | Path | None = None,
-          method: str | None = None, net: NetConfig | None = None, eval_fn: EvalFn | None = None,
-          progress: bool = True) -> TrainResult:
+def train(
+    config: TrainConfig,
+    sampler: Sampler,
+    out_dir: str | Path,
+    *,
+    init_checkpoint: str | Path | None = None,
+    method: str | None = None,
+    net: NetConfig | None = None,
+    eval_fn: EvalFn | None = None,
+    progress: bool = True,
+) -> TrainResult:
     """Train (or resume training) a Q-function from ``sampler``'s transitions into ``out_dir``.
 
     ``net`` is the architecture for a run from scratch without a parent; with
@@ -147,25 +164,37 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
         raise ConfigError("the architecture comes from init_checkpoint; do not pass net as well")
     data = sampler.describe()
     if (data.get("n_step", 1), data.get("gamma", config.gamma)) != (config.n_step, config.gamma):
-        raise ConfigError(f"the sampler gives {data.get('n_step', 1)}-step transitions (gamma {data.get('gamma')}) but "
-                          f"the config asks for n_step {config.n_step}, gamma {config.gamma}; build the sampler with "
-                          "the config's values")
+        raise ConfigError(
+            f"the sampler gives {data.get('n_step', 1)}-step transitions (gamma {data.get('gamma')}) but "
+            f"the config asks for n_step {config.n_step}, gamma {config.gamma}; build the sampler with "
+            "the config's values"
+        )
     parent = load_checkpoint(Path(init_checkpoint)) if init_checkpoint is not None else None
     lr = resolve_lr(config, method, parent)
     resolved = config.replace(lr=lr, conservative=resolve_conservative(config, parent))
     model = initial_network(method, parent, net or (None if parent else NetConfig()), config.seed)
     if config.shrink_perturb is not None:
         if parent is None or method == "scratch":
-            raise ConfigError("shrink_perturb changes a parent's weights; use it with init_checkpoint and a "
-                              "fine-tuning method (not scratch)")
+            raise ConfigError(
+                "shrink_perturb changes a parent's weights; use it with init_checkpoint and a "
+                "fine-tuning method (not scratch)"
+            )
         alpha, sigma = config.shrink_perturb
         shrink_perturb(model, alpha, sigma, seed=config.seed + 1)
     # The parent by content id, not by folder: the config is part of the checkpoint's id, which must not depend
     # on where the workspace is (a dataset collected by this checkpoint records that id).
-    parent_info = None if parent is None else {"id": checkpoint_id(parent.path), "step": parent.step,
-                                               "method": parent.config["method"]}
-    run: dict[str, Any] = {"training": resolved.to_dict(), "method": method, "parent": parent_info,
-           "architecture": model.cfg.to_dict(), "data": data}
+    parent_info = (
+        None
+        if parent is None
+        else {"id": checkpoint_id(parent.path), "step": parent.step, "method": parent.config["method"]}
+    )
+    run: dict[str, Any] = {
+        "training": resolved.to_dict(),
+        "method": method,
+        "parent": parent_info,
+        "architecture": model.cfg.to_dict(),
+        "data": data,
+    }
     _check_same_run(out, run)
 
     learner = Learner.create(model, lr, resolved)
@@ -185,8 +214,9 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
         return TrainResult(final, step, False)
 
     def ckpt_config(at: int) -> dict:
-        return checkpoint_config(learner.online, training=resolved, method=method, data=run["data"],
-                                 parent=parent_info, step=at)
+        return checkpoint_config(
+            learner.online, training=resolved, method=method, data=run["data"], parent=parent_info, step=at
+        )
 
     log = _Logger(out, step)
     evals: list[dict[str, Any]] = []
@@ -194,8 +224,9 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
     window: dict[str, float] = {}
     last_row: dict[str, float] = {}
     t0, n0 = time.perf_counter(), 0
-    bar = progress_bar(total=config.steps, initial=step, unit="step", disable=not progress, dynamic_ncols=True,
-               desc=f"train {method}")
+    bar = progress_bar(
+        total=config.steps, initial=step, unit="step", disable=not progress, dynamic_ncols=True, desc=f"train {method}"
+    )
     try:
         if eval_fn is not None and config.eval_every and step == 0:
             stop = _evaluate(eval_fn, learner, resolved, 0, out, log, evals)
@@ -212,11 +243,16 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
             bar.update(1)
             if step % config.log_every == 0 or step == config.steps:
                 dt = time.perf_counter() - t0
-                last_row = {k: v / n0 for k, v in window.items()} | {"charts/steps_per_s": n0 / max(dt, 1e-9),
-                                                                      "charts/lr": step_lr}
+                last_row = {k: v / n0 for k, v in window.items()} | {
+                    "charts/steps_per_s": n0 / max(dt, 1e-9),
+                    "charts/lr": step_lr,
+                }
                 log.metrics(step, last_row)
-                bar.set_postfix(loss=f"{last_row['losses/q_loss']:.4f}", q=f"{last_row['q/mean']:.3f}",
-                                target=f"{last_row['q/target_mean']:.3f}")
+                bar.set_postfix(
+                    loss=f"{last_row['losses/q_loss']:.4f}",
+                    q=f"{last_row['q/mean']:.3f}",
+                    target=f"{last_row['q/target_mean']:.3f}",
+                )
                 window, t0, n0 = {}, time.perf_counter(), 0
             evaluated = eval_fn is not None and config.eval_every and step % config.eval_every == 0
             if evaluated and eval_fn is not None:
@@ -230,8 +266,9 @@ def train(config: TrainConfig, sampler: Sampler, out_dir: str | Path, *, init_ch
     return TrainResult(final, step, stop, last_row, evals)
 
 
-def _evaluate(eval_fn: EvalFn, learner: Learner, cfg: TrainConfig, step: int, out: Path, log: _Logger,
-              evals: list) -> bool:
+def _evaluate(
+    eval_fn: EvalFn, learner: Learner, cfg: TrainConfig, step: int, out: Path, log: _Logger, evals: list
+) -> bool:
     snapshot = copy.deepcopy(learner.online).eval()
     policy = CEMPolicy(snapshot, cfg.cem, name=f"{out.name}@{step}", info={"run": str(out), "step": step})
     result = dict(eval_fn(step, policy) or {})
@@ -258,8 +295,12 @@ def _latest_trainer_state(out: Path) -> Path | None:
 
 
 def _save_periodic(out: Path, learner: Learner, rng: np.random.Generator, step: int, config: dict, keep: int) -> None:
-    state = {"learner": learner.state_dict(), "numpy_rng": rng.bit_generator.state,
-             "torch_rng": torch.get_rng_state(), "step": step}
+    state = {
+        "learner": learner.state_dict(),
+        "numpy_rng": rng.bit_generator.state,
+        "torch_rng": torch.get_rng_state(),
+        "step": step,
+    }
     save_checkpoint(out / CHECKPOINT_DIR / f"step-{step:09d}", learner.online, config, trainer_state=state)
     with_state = [p for p in _checkpoint_dirs(out) if (p / TRAINER_FILE).is_file()]
     for p in with_state[:-keep]:
@@ -282,9 +323,15 @@ def _check_same_run(out: Path, run: dict) -> None:
             a = {k: v for k, v in a.items() if k not in RESUMABLE_CHANGES}
             b = {k: v for k, v in b.items() if k not in RESUMABLE_CHANGES}
         if a != b:
-            diff = sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k)) if isinstance(a, dict) and isinstance(b, dict) else []
-            raise ConfigError(f"{out} holds a run with a different {section}{f' ({diff})' if diff else ''}; "
-                              "resume with the same settings or choose another output folder")
+            diff = (
+                sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
+                if isinstance(a, dict) and isinstance(b, dict)
+                else []
+            )
+            raise ConfigError(
+                f"{out} holds a run with a different {section}{f' ({diff})' if diff else ''}; "
+                "resume with the same settings or choose another output folder"
+            )
 
 
 class _Logger:

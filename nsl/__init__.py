@@ -40,15 +40,36 @@ from nsl.lazy import lazy_exports
 from nsl.version import __version__, code_version  # noqa: F401  (re-exported)
 
 _root = _os.path.dirname(_os.path.dirname(_os.path.abspath(__file__)))
-if _os.path.isfile(_os.path.join(_root, "pyproject.toml")) and _os.path.isdir(
-    _os.path.join(_root, "collectors")
-):
+if _os.path.isfile(_os.path.join(_root, "pyproject.toml")) and _os.path.isdir(_os.path.join(_root, "collectors")):
     __path__.append(_root)  # type: ignore[name-defined]  # noqa: F821
 
-_API = ("CollectConfig", "ContinualConfig", "Curriculum", "EfficiencyConfig", "EvaluateOptions", "StudyRun",
-        "TrainOptions", "EVAL_SCENES", "FINAL_REPORTING_SCENES", "REPORTING_SCENES", "SELECTION_SCENES",
-        "build_curriculum", "collect", "continual", "efficiency", "evaluate", "pull", "push", "report", "study_report",
-        "study_run", "study_status", "train", "transfer_report", "transfer_run")
+_API = (
+    "CollectConfig",
+    "ContinualConfig",
+    "Curriculum",
+    "EfficiencyConfig",
+    "EvaluateOptions",
+    "StudyRun",
+    "TrainOptions",
+    "EVAL_SCENES",
+    "FINAL_REPORTING_SCENES",
+    "REPORTING_SCENES",
+    "SELECTION_SCENES",
+    "build_curriculum",
+    "collect",
+    "continual",
+    "efficiency",
+    "evaluate",
+    "pull",
+    "push",
+    "report",
+    "study_report",
+    "study_run",
+    "study_status",
+    "train",
+    "transfer_report",
+    "transfer_run",
+)
 
 
 _, __getattr__, __dir__ = lazy_exports(__name__, {"api": _API}, globals())  # loaded on first use (PEP 562)

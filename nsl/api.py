@@ -40,10 +40,33 @@ if TYPE_CHECKING:
 
 C = TypeVar("C")
 
-__all__ = ["CollectConfig", "ContinualConfig", "Curriculum", "EfficiencyConfig", "EvaluateOptions", "StudyRun",
-           "TrainOptions", "EVAL_SCENES", "FINAL_REPORTING_SCENES", "REPORTING_SCENES", "SELECTION_SCENES",
-           "build_curriculum", "collect", "continual", "efficiency", "evaluate", "pull", "push", "report", "study_report",
-           "study_run", "study_status", "train", "transfer_report", "transfer_run"]
+__all__ = [
+    "CollectConfig",
+    "ContinualConfig",
+    "Curriculum",
+    "EfficiencyConfig",
+    "EvaluateOptions",
+    "StudyRun",
+    "TrainOptions",
+    "EVAL_SCENES",
+    "FINAL_REPORTING_SCENES",
+    "REPORTING_SCENES",
+    "SELECTION_SCENES",
+    "build_curriculum",
+    "collect",
+    "continual",
+    "efficiency",
+    "evaluate",
+    "pull",
+    "push",
+    "report",
+    "study_report",
+    "study_run",
+    "study_status",
+    "train",
+    "transfer_report",
+    "transfer_run",
+]
 
 
 def _settle(cls: type[C], config: C | None, fields: Mapping[str, Any], call: str) -> C:
@@ -51,7 +74,9 @@ def _settle(cls: type[C], config: C | None, fields: Mapping[str, Any], call: str
     known = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
     unknown = sorted(set(fields) - known)
     if unknown:
-        raise ConfigError(f"nsl.{call}() has no setting {', '.join(unknown)}; the settings are {', '.join(sorted(known))}")
+        raise ConfigError(
+            f"nsl.{call}() has no setting {', '.join(unknown)}; the settings are {', '.join(sorted(known))}"
+        )
     if config is None:
         return cls(**fields)
     if not isinstance(config, cls):
@@ -61,8 +86,16 @@ def _settle(cls: type[C], config: C | None, fields: Mapping[str, Any], call: str
 
 # --- datasets, training, evaluation ---------------------------------------------------------------------------------
 
-def collect(config: CollectConfig | None = None, /, *, restart: bool = False, cluster: str | None = None,
-            progress: bool = True, **fields: Any):
+
+def collect(
+    config: CollectConfig | None = None,
+    /,
+    *,
+    restart: bool = False,
+    cluster: str | None = None,
+    progress: bool = True,
+    **fields: Any,
+):
     """Collect episodes into a versioned dataset (``nsl collect``); returns the published DatasetVersion.
 
     The result's ``ref`` (``NAME@vN``), ``hash``, ``num_episodes`` and ``root`` name what was written; the version
@@ -87,13 +120,24 @@ def train(options: TrainOptions | None = None, /, *, progress: bool = True, **fi
         fields["data"] = tuple(d if isinstance(d, str) else f"{d[0]}={d[1]}" for d in fields["data"])
     if "net" in fields:
         net = fields["net"]
-        fields["net"] = tuple(f"{k}={','.join(map(str, v)) if isinstance(v, (list, tuple)) else v}"
-                              for k, v in net.items()) if isinstance(net, Mapping) else tuple(net)
+        fields["net"] = (
+            tuple(f"{k}={','.join(map(str, v)) if isinstance(v, (list, tuple)) else v}" for k, v in net.items())
+            if isinstance(net, Mapping)
+            else tuple(net)
+        )
     return run(_settle(TrainOptions, options, fields, "train"), progress=progress)
 
 
-def evaluate(policies: str | Sequence[str], options: EvaluateOptions | None = None, /, *, progress: bool = True,
-             cluster: str | None = None, source: str | None = None, **fields: Any) -> EvaluationResult:
+def evaluate(
+    policies: str | Sequence[str],
+    options: EvaluateOptions | None = None,
+    /,
+    *,
+    progress: bool = True,
+    cluster: str | None = None,
+    source: str | None = None,
+    **fields: Any,
+) -> EvaluationResult:
     """Success rates with 95% intervals per shift (``nsl eval``); checkpoint results are stored in the catalog.
 
     ``policies`` is one reference or several (``ckpt:NAME[@STEP]``, ``oracle[:NOISE]``, ``random``).  Returns an
@@ -103,12 +147,18 @@ def evaluate(policies: str | Sequence[str], options: EvaluateOptions | None = No
     from nsl.services.evaluate import evaluate as run
 
     refs = [r.strip() for r in policies.split(",")] if isinstance(policies, str) else list(policies)
-    return run([r for r in refs if r], _settle(EvaluateOptions, options, fields, "evaluate"), progress=progress,
-               source=source, cluster=cluster)
+    return run(
+        [r for r in refs if r],
+        _settle(EvaluateOptions, options, fields, "evaluate"),
+        progress=progress,
+        source=source,
+        cluster=cluster,
+    )
 
 
-def continual(config: ContinualConfig | None = None, /, *, name: str = "continual", progress: bool = True,
-              **fields: Any) -> ContinualResult:
+def continual(
+    config: ContinualConfig | None = None, /, *, name: str = "continual", progress: bool = True, **fields: Any
+) -> ContinualResult:
     """Fine-tune through a sequence of shifts; the performance matrix, forgetting and transfer (``nsl continual``).
 
     ``sequence`` is a list of shift specs (or one comma-separated string).  Resumes a run of the same ``name``.
@@ -122,8 +172,9 @@ def continual(config: ContinualConfig | None = None, /, *, name: str = "continua
     return run(_settle(ContinualConfig, config, fields, "continual"), name, progress=progress)
 
 
-def efficiency(config: EfficiencyConfig | None = None, /, *, name: str = "efficiency", progress: bool = True,
-               **fields: Any):
+def efficiency(
+    config: EfficiencyConfig | None = None, /, *, name: str = "efficiency", progress: bool = True, **fields: Any
+):
     """Fine-tune on each tier of the target data and evaluate (``nsl efficiency``); returns the TierResults.
 
     The results are in ``$NSL_HOME/runs/NAME/tiers.json``; a run of the same ``name`` resumes.
@@ -153,6 +204,7 @@ def report(run: str | Path, *, out: str | Path | None = None, title: str | None 
 
 # --- sharing --------------------------------------------------------------------------------------------------------
 
+
 def push(ref: str, dest: str) -> Pushed:
     """Publish ``data:NAME@vN`` or ``ckpt:NAME[@STEP]`` to the Hub or an fsspec remote (``nsl push``)."""
     from nsl.services.share import push as run
@@ -168,6 +220,7 @@ def pull(src: str, *, as_name: str | None = None) -> Pulled:
 
 
 # --- the study, transfer and curricula ------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class StudyRun:
@@ -227,8 +280,13 @@ class Curriculum:
     picture: Path
 
 
-def build_curriculum(*, matrix: str | Path | None = None, transfer: str | None = None,
-                     tasks: Sequence[str] | None = None, out: str | Path | None = None) -> Curriculum:
+def build_curriculum(
+    *,
+    matrix: str | Path | None = None,
+    transfer: str | None = None,
+    tasks: Sequence[str] | None = None,
+    out: str | Path | None = None,
+) -> Curriculum:
     """The cheapest order to learn ``tasks`` from a transfer matrix (``nsl curriculum``): give ``matrix`` (a
     matrix.json) or ``transfer`` (a transfer's name)."""
     from nsl.curriculum import build_curriculum as build

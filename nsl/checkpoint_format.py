@@ -59,8 +59,10 @@ def encode_config(config: Mapping[str, Any]) -> bytes:
     try:
         return (json.dumps(dict(config), indent=2, sort_keys=True, allow_nan=False) + "\n").encode()
     except (TypeError, ValueError) as e:
-        raise ConfigError(f"checkpoint config is not plain JSON data ({e}); convert paths, tuples of "
-                          "objects and NaN to strings/lists/numbers first") from None
+        raise ConfigError(
+            f"checkpoint config is not plain JSON data ({e}); convert paths, tuples of "
+            "objects and NaN to strings/lists/numbers first"
+        ) from None
 
 
 def canonical_config(config: Mapping[str, Any]) -> bytes:
@@ -72,19 +74,22 @@ def read_config(folder: Path) -> dict[str, Any]:
     """The ``config.json`` of the checkpoint folder ``folder`` as a dict (no schema check)."""
     folder = Path(folder)
     if not folder.is_dir():
-        raise UnknownReferenceError(f"no checkpoint folder at {folder}; pass the folder that holds {WEIGHTS_FILE} "
-                                    f"and {CONFIG_FILE}")
+        raise UnknownReferenceError(
+            f"no checkpoint folder at {folder}; pass the folder that holds {WEIGHTS_FILE} and {CONFIG_FILE}"
+        )
     path = folder / CONFIG_FILE
     if not path.is_file():
         raise CorruptDataError(f"checkpoint {folder} has no {CONFIG_FILE}; it is incomplete or not an nsl checkpoint")
     try:
         config = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, ValueError) as e:
-        raise CorruptDataError(f"checkpoint {folder}: {CONFIG_FILE} is not valid JSON ({e}); restore it or "
-                               "retrain") from None
+        raise CorruptDataError(
+            f"checkpoint {folder}: {CONFIG_FILE} is not valid JSON ({e}); restore it or retrain"
+        ) from None
     if not isinstance(config, dict):
-        raise CorruptDataError(f"checkpoint {folder}: {CONFIG_FILE} must hold a JSON object, not "
-                               f"{type(config).__name__}")
+        raise CorruptDataError(
+            f"checkpoint {folder}: {CONFIG_FILE} must hold a JSON object, not {type(config).__name__}"
+        )
     return config
 
 
@@ -108,8 +113,9 @@ def folder_digests(folder: Path) -> dict[str, str]:
     folder = Path(folder)
     missing = [f for f in CONTENT_FILES if not (folder / f).is_file()]
     if missing:
-        raise CorruptDataError(f"{folder} is not a checkpoint folder: {', '.join(missing)} missing; "
-                               f"it needs {' and '.join(CONTENT_FILES)}")
+        raise CorruptDataError(
+            f"{folder} is not a checkpoint folder: {', '.join(missing)} missing; it needs {' and '.join(CONTENT_FILES)}"
+        )
     return {name: file_sha256(folder / name) for name in CONTENT_FILES}
 
 
@@ -128,8 +134,10 @@ def check_safetensors(head: bytes, what: str) -> None:
         raise ConfigError(f"{what} is not a safetensors file (only {len(head)} bytes)")
     (n,) = struct.unpack("<Q", head[:8])
     if not 2 <= n <= 100_000_000 or head[8:9] != b"{":
-        raise ConfigError(f"{what} is not a safetensors file (bad header); save weights with "
-                          "safetensors.torch.save(state_dict) or safetensors.numpy.save_file")
+        raise ConfigError(
+            f"{what} is not a safetensors file (bad header); save weights with "
+            "safetensors.torch.save(state_dict) or safetensors.numpy.save_file"
+        )
 
 
 # ------------------------------------------------------------------ writing

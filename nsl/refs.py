@@ -22,8 +22,10 @@ NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
 def check_name(kind: str, name: str) -> str:
     """Validate a dataset, checkpoint or tag name; return it."""
     if not isinstance(name, str) or not NAME_RE.fullmatch(name):
-        raise ConfigError(f"{kind} name {name!r} is not valid; use letters, digits, '.', '_' and '-' "
-                          "(no '@', ':' or spaces, at most 100 characters), starting with a letter or digit")
+        raise ConfigError(
+            f"{kind} name {name!r} is not valid; use letters, digits, '.', '_' and '-' "
+            "(no '@', ':' or spaces, at most 100 characters), starting with a letter or digit"
+        )
     return name
 
 
@@ -64,7 +66,9 @@ def parse_data_ref(text: str) -> DataRef:
     v = None
     if at:
         if not re.fullmatch(r"v[0-9]+", version) or int(version[1:]) < 1:
-            raise ConfigError(f"dataset reference {text!r} is malformed: version {version!r}; write it as @vN, "
-                              f"e.g. {name}@v1 or {name}@v1:100")
+            raise ConfigError(
+                f"dataset reference {text!r} is malformed: version {version!r}; write it as @vN, "
+                f"e.g. {name}@v1 or {name}@v1:100"
+            )
         v = int(version[1:])
     return DataRef(name, v, parse_tier(tier, f"dataset reference {text!r}: tier") if colon else None)

@@ -68,9 +68,15 @@ def main() -> int:
     subprocess.run([sys.executable, "-m", "nsl", "study", "run", str(plan), "--quiet"], env=env, check=True)
     status = json.loads((home / "studies" / "costs" / "status.json").read_text())
     units = {n: u["seconds"] for n, u in status["units"].items()}
-    out = {"load_average": os.getloadavg(), "cpus": os.cpu_count(), "steps": args.steps,
-           "eval_episodes": args.episodes, "collect_episodes": args.collect, "base_episodes": args.base,
-           "units": units}
+    out = {
+        "load_average": os.getloadavg(),
+        "cpus": os.cpu_count(),
+        "steps": args.steps,
+        "eval_episodes": args.episodes,
+        "collect_episodes": args.collect,
+        "base_episodes": args.base,
+        "units": units,
+    }
     print(json.dumps(out, indent=2, sort_keys=True))
     return 0
 

@@ -23,14 +23,21 @@ __all__ = ["CollectConfig", "collect", "on_version_created"]
 def on_version_created(version) -> None:
     """Record a newly published dataset version (a ``DatasetVersion``) in the catalog."""
     from nsl.catalog import Catalog
+
     from .refs import register_dataset
 
     with Catalog() as cat:
         register_dataset(cat, version)
 
 
-def collect(cfg: CollectConfig, *, restart: bool = False, stop_after_files: int = 0, cluster: str | None = None,
-            progress: bool = True):
+def collect(
+    cfg: CollectConfig,
+    *,
+    restart: bool = False,
+    stop_after_files: int = 0,
+    cluster: str | None = None,
+    progress: bool = True,
+):
     """Collect ``cfg.episodes`` episodes into dataset ``cfg.data`` (resuming or appending); returns its DatasetVersion.
 
     ``restart`` discards an unfinished collection; ``cluster`` runs the episodes on Ray (None: ``$NSL_CLUSTER``
@@ -39,52 +46,82 @@ def collect(cfg: CollectConfig, *, restart: bool = False, stop_after_files: int 
     """
     from nsl.collectors import EnvConfig, collect_episodes
     from nsl.datasets import api
+
     from .refs import policy_factory
 
     env_config = EnvConfig(shift=cfg.shift, split=cfg.split, image_size=cfg.image_size)
     make_policy = policy_factory(cfg.policy, env_config, epsilon=cfg.epsilon, action_noise=cfg.action_noise)
-    spec = {"env": env_config.to_dict(), "policy": make_policy().describe(), "policy_ref": cfg.policy,
-            "seed": cfg.seed}
-    coll = api.Collection.begin(cfg.data, cfg.episodes, spec, cfg.image_size, cfg.episodes_per_file,
-                                restart=restart)
+    spec = {"env": env_config.to_dict(), "policy": make_policy().describe(), "policy_ref": cfg.policy, "seed": cfg.seed}
+    coll = api.Collection.begin(cfg.data, cfg.episodes, spec, cfg.image_size, cfg.episodes_per_file, restart=restart)
     if coll.up_to_date:
         v = coll.parent
         assert v is not None  # only a dataset that already has a version can be up to date
-        print(f"{v.ref} already holds {v.num_episodes} episodes (asked for {cfg.episodes}); nothing to collect"
-              + (f"; use {v.name}:{cfg.episodes} for the first {cfg.episodes}" if cfg.episodes < v.num_episodes
-                 else ""))
+        print(
+            f"{v.ref} already holds {v.num_episodes} episodes (asked for {cfg.episodes}); nothing to collect"
+            + (f"; use {v.name}:{cfg.episodes} for the first {cfg.episodes}" if cfg.episodes < v.num_episodes else "")
+        )
         return v
     missing = coll.missing_indices()
     if len(missing) < coll.stop - coll.start:
-        print(f"resuming {cfg.data}: {coll.stop - coll.start - len(missing)} of {coll.stop - coll.start} "
-              "episodes already staged", file=sys.stderr)
+        print(
+            f"resuming {cfg.data}: {coll.stop - coll.start - len(missing)} of {coll.stop - coll.start} "
+            "episodes already staged",
+            file=sys.stderr,
+        )
     started = time.perf_counter()
     from nsl.cluster import open_executor
 
     with open_executor(cluster) as ex:  # local processes, or chunks as Ray tasks (same episodes)
-        _collect(coll, cfg, env_config, make_policy, missing, stop_after_files, progress,
-                 functools.partial(collect_episodes, runner=ex.runner))
-    version = coll.finish(created={
-        "command": "nsl collect " + shlex.join(_argv(cfg)), "workers": cfg.workers, "batch_size": cfg.batch_size,
-        "cluster": ex.name,
-        "collect_seconds": round(time.perf_counter() - started, 2), "config": asdict(cfg)})
+        _collect(
+            coll,
+            cfg,
+            env_config,
+            make_policy,
+            missing,
+            stop_after_files,
+            progress,
+            functools.partial(collect_episodes, runner=ex.runner),
+        )
+    version = coll.finish(
+        created={
+            "command": "nsl collect " + shlex.join(_argv(cfg)),
+            "workers": cfg.workers,
+            "batch_size": cfg.batch_size,
+            "cluster": ex.name,
+            "collect_seconds": round(time.perf_counter() - started, 2),
+            "config": asdict(cfg),
+        }
+    )
     info = version.describe()
     on_version_created(version)
-    print(f"wrote {version.ref}: {version.num_episodes} episodes ({coll.stop - coll.start} new), "
-          f"{version.num_frames} frames, success {info['success_rate']:.1%}, {version.hash[:19]}... "
-          f"at {version.root}")
+    print(
+        f"wrote {version.ref}: {version.num_episodes} episodes ({coll.stop - coll.start} new), "
+        f"{version.num_frames} frames, success {info['success_rate']:.1%}, {version.hash[:19]}... "
+        f"at {version.root}"
+    )
     return version
 
 
-def _collect(coll, cfg: CollectConfig, env_config, make_policy, missing: list[int], stop_after: int, progress: bool,
-             collect_episodes) -> None:
+def _collect(
+    coll,
+    cfg: CollectConfig,
+    env_config,
+    make_policy,
+    missing: list[int],
+    stop_after: int,
+    progress: bool,
+    collect_episodes,
+) -> None:
     from nsl.progress import progress_bar
 
     if not missing:
         return
-    episodes = collect_episodes(env_config, make_policy, missing, seed=cfg.seed, workers=cfg.workers,
-                                batch=cfg.batch_size)
-    bar = progress_bar(total=len(missing), unit="ep", desc=f"collect {cfg.data}", dynamic_ncols=True, disable=not progress)
+    episodes = collect_episodes(
+        env_config, make_policy, missing, seed=cfg.seed, workers=cfg.workers, batch=cfg.batch_size
+    )
+    bar = progress_bar(
+        total=len(missing), unit="ep", desc=f"collect {cfg.data}", dynamic_ncols=True, disable=not progress
+    )
     successes = files = 0
     try:
         for k, ep in enumerate(episodes):

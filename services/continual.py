@@ -60,8 +60,11 @@ def continual(config: ContinualConfig, name: str = "continual", *, progress: boo
 
     tasks = ("base", *cfg.sequence)
     matrix_path = run_dir / "matrix.json"
-    matrix = PerformanceMatrix.load(matrix_path) if matrix_path.exists() else \
-        PerformanceMatrix(tasks=tasks, stages=(), success=())
+    matrix = (
+        PerformanceMatrix.load(matrix_path)
+        if matrix_path.exists()
+        else PerformanceMatrix(tasks=tasks, stages=(), success=())
+    )
     policy = f"ckpt:{init.id}"
     checkpoints = {}
     for i, stage in enumerate(("init", *cfg.sequence)):
@@ -85,17 +88,35 @@ def continual(config: ContinualConfig, name: str = "continual", *, progress: boo
 
 def _fine_tune(data: str, init: str, name: str, shift: str, cfg: ContinualConfig, progress: bool) -> str:
     """Fine-tune ``init`` on ``data`` mixed 50/50 with the base data; returns the checkpoint id."""
-    return train_service.train(TrainOptions(data=(f"{cfg.base_data}=0.5", f"{data}=0.5"), init=init,
-                                            steps=cfg.steps, name=name, seed=cfg.seed, target_shift=shift),
-                               progress=progress).id
+    return train_service.train(
+        TrainOptions(
+            data=(f"{cfg.base_data}=0.5", f"{data}=0.5"),
+            init=init,
+            steps=cfg.steps,
+            name=name,
+            seed=cfg.seed,
+            target_shift=shift,
+        ),
+        progress=progress,
+    ).id
 
 
 def _stage(run: str, i: int, shift: str, policy: str, cfg: ContinualConfig, progress: bool) -> str:
     """Collect in ``shift`` with ``policy``, fine-tune it 50/50 with base data; return the checkpoint id."""
     data, name = f"{run}-{slug(shift)}", f"{run}-s{i}-{slug(shift)}"
-    collect_service.collect(CollectConfig(shift=shift, episodes=cfg.episodes, policy=policy, data=data,
-                                          workers=cfg.workers, batch_size=8, seed=cfg.seed + i,
-                                          epsilon=cfg.epsilon), progress=progress)
+    collect_service.collect(
+        CollectConfig(
+            shift=shift,
+            episodes=cfg.episodes,
+            policy=policy,
+            data=data,
+            workers=cfg.workers,
+            batch_size=8,
+            seed=cfg.seed + i,
+            epsilon=cfg.epsilon,
+        ),
+        progress=progress,
+    )
     return _fine_tune(data, policy, name, shift, cfg, progress)
 
 
@@ -106,17 +127,21 @@ def _single_step(run: str, matrix, cfg: ContinualConfig, init, progress: bool):
         if k == 0:  # the first stage already is a single step from init (same data, seed and parent)
             single[shift] = matrix.rate(1, matrix.tasks.index(shift))
             continue
-        ckpt = _fine_tune(f"{run}-{slug(shift)}", f"ckpt:{init.id}", f"{run}-single-{slug(shift)}", shift, cfg,
-                          progress)
+        ckpt = _fine_tune(
+            f"{run}-{slug(shift)}", f"ckpt:{init.id}", f"{run}-single-{slug(shift)}", shift, cfg, progress
+        )
         single[shift] = _evaluate(f"ckpt:{ckpt}", (shift,), cfg, progress)[shift]
     return type(matrix)(**{**matrix.__dict__, "single": {k: v.success_rate for k, v in single.items()}})
 
 
 def _evaluate(policy: str, tasks, cfg: ContinualConfig, progress: bool) -> dict:
     """Success of ``policy`` on each task (``nsl eval``'s defaults otherwise), catalogued as "continual"."""
-    result = evaluate_service.evaluate([policy], EvaluateOptions(shift=",".join(tasks), episodes=cfg.eval_episodes,
-                                                                 workers=cfg.workers),
-                                       progress=progress, source="continual")
+    result = evaluate_service.evaluate(
+        [policy],
+        EvaluateOptions(shift=",".join(tasks), episodes=cfg.eval_episodes, workers=cfg.workers),
+        progress=progress,
+        source="continual",
+    )
     return result.table[policy]
 
 

@@ -28,7 +28,6 @@ def efficiency(config: EfficiencyConfig, name: str = "efficiency", *, progress: 
     ``config.data`` names whole target datasets; they are pinned to their versions (``NAME@vN``) in the saved
     config.
     """
-    from nsl import workspace
     from nsl.catalog import Catalog
     from nsl.datasets import api
     from nsl.errors import ConfigError
@@ -36,8 +35,14 @@ def efficiency(config: EfficiencyConfig, name: str = "efficiency", *, progress: 
 
     from .refs import open_run, resolve_init
 
-    data, sizes, init, base_data, steps, eval_episodes = (config.data, config.sizes, config.init, config.base_data,
-                                                          config.steps, config.eval_episodes)
+    data, sizes, init, base_data, steps, eval_episodes = (
+        config.data,
+        config.sizes,
+        config.init,
+        config.base_data,
+        config.steps,
+        config.eval_episodes,
+    )
 
     # Validate everything before any work starts.
     if not sizes or any(k < 1 for k in sizes):
@@ -51,8 +56,9 @@ def efficiency(config: EfficiencyConfig, name: str = "efficiency", *, progress: 
     for ref in data:
         view = api.open_view(ref)
         if view.num_episodes != view.version.num_episodes:
-            raise ConfigError(f"--data {ref!r} is a tier; give the whole dataset (NAME or NAME@vN); "
-                              "--sizes sets the tiers")
+            raise ConfigError(
+                f"--data {ref!r} is a tier; give the whole dataset (NAME or NAME@vN); --sizes sets the tiers"
+            )
         fits = tuple(sorted({k for k in sizes if k <= view.num_episodes}))
         if not fits:
             raise ConfigError(f"--data {ref!r} holds {view.num_episodes} episodes, fewer than every size in --sizes")
@@ -61,8 +67,9 @@ def efficiency(config: EfficiencyConfig, name: str = "efficiency", *, progress: 
     if len(set(shifts)) != len(shifts):
         raise ConfigError(f"--data gives two datasets of one shift ({shifts}); give one dataset per shift")
 
-    cfg = EfficiencyConfig(**{**asdict(config), "data": tuple(r for r, _, _ in targets),
-                              "sizes": tuple(sorted(set(sizes)))})
+    cfg = EfficiencyConfig(
+        **{**asdict(config), "data": tuple(r for r, _, _ in targets), "sizes": tuple(sorted(set(sizes)))}
+    )
     run_dir = open_run(name, cfg)
 
     path = run_dir / TIERS_FILE
@@ -89,26 +96,38 @@ def efficiency(config: EfficiencyConfig, name: str = "efficiency", *, progress: 
             print(f"{shift} tier {k}: {row.tiers[k].percent()} (base {row.base.percent()})")
         if cfg.scratch and "scratch" not in (row.comparisons or {}):
             ckpt = _fine_tune(name, ref, shift, fits[-1], None, cfg, progress)
-            row = TierRow(row.base, row.tiers, {**(row.comparisons or {}), "scratch": _evaluate(ckpt, shift, cfg, progress)})
+            row = TierRow(
+                row.base, row.tiers, {**(row.comparisons or {}), "scratch": _evaluate(ckpt, shift, cfg, progress)}
+            )
             save(shift, row)
     return TierResults(dict(rows))
 
 
-def _fine_tune(run: str, ref: str, shift: str, k: int, init: str | None, cfg: EfficiencyConfig,
-               progress: bool) -> str:
+def _fine_tune(run: str, ref: str, shift: str, k: int, init: str | None, cfg: EfficiencyConfig, progress: bool) -> str:
     """Train on the first ``k`` episodes of ``ref`` mixed 50/50 with the base data; returns ``ckpt:ID``."""
     name = f"{run}-{slug(shift)}-{k}" if init else f"{run}-{slug(shift)}-scratch-{k}"
-    result = train_service.train(TrainOptions(data=(f"{cfg.base_data}=0.5", f"{ref}:{k}=0.5"), init=init,
-                                              steps=cfg.steps, name=name, seed=cfg.seed, target_shift=shift),
-                                 progress=progress)
+    result = train_service.train(
+        TrainOptions(
+            data=(f"{cfg.base_data}=0.5", f"{ref}:{k}=0.5"),
+            init=init,
+            steps=cfg.steps,
+            name=name,
+            seed=cfg.seed,
+            target_shift=shift,
+        ),
+        progress=progress,
+    )
     return f"ckpt:{result.id}"
 
 
 def _evaluate(policy: str, shift: str, cfg: EfficiencyConfig, progress: bool):
     from nsl.eval import Rate
 
-    result = evaluate_service.evaluate([policy], EvaluateOptions(shift=shift, episodes=cfg.eval_episodes,
-                                                                 workers=cfg.workers),
-                                       progress=progress, source="efficiency")
+    result = evaluate_service.evaluate(
+        [policy],
+        EvaluateOptions(shift=shift, episodes=cfg.eval_episodes, workers=cfg.workers),
+        progress=progress,
+        source="efficiency",
+    )
     (rate,) = result.table[policy].values()
     return Rate.of(rate)

@@ -28,8 +28,14 @@ class EvaluationResult:
         return getattr(self, key)
 
 
-def evaluate(refs: list[str], options: EvaluateOptions = EvaluateOptions(), *, progress: bool = True,
-             source: str | None = None, cluster: str | None = None) -> EvaluationResult:
+def evaluate(
+    refs: list[str],
+    options: EvaluateOptions = EvaluateOptions(),
+    *,
+    progress: bool = True,
+    source: str | None = None,
+    cluster: str | None = None,
+) -> EvaluationResult:
     """Evaluate policy references on shifts; checkpoint results go to the catalog.
 
     ``refs`` are policies (``random``, ``oracle[:NOISE]``, ``ckpt:...``);
@@ -46,7 +52,14 @@ def evaluate(refs: list[str], options: EvaluateOptions = EvaluateOptions(), *, p
 
     o = options
     shift, severity, episodes, workers, batch_size, split, seed = (
-        o.shift, o.severity, o.episodes, o.workers, o.batch_size, o.split, o.seed)
+        o.shift,
+        o.severity,
+        o.episodes,
+        o.workers,
+        o.batch_size,
+        o.split,
+        o.seed,
+    )
 
     if episodes < 1:
         raise ConfigError(f"--episodes {episodes} must be at least 1")
@@ -60,8 +73,10 @@ def evaluate(refs: list[str], options: EvaluateOptions = EvaluateOptions(), *, p
     from nsl.cluster import open_executor
 
     with open_executor(cluster) as ex:  # local processes, or scene chunks as Ray tasks (same outcomes)
-        outcomes = {ref: evaluate_outcomes(make, shifts, config, progress=progress, runner=ex.runner)
-                    for ref, make in factories.items()}
+        outcomes = {
+            ref: evaluate_outcomes(make, shifts, config, progress=progress, runner=ex.runner)
+            for ref, make in factories.items()
+        }
     table = {ref: {s: success_rate_from_outcomes(s, out) for s, out in res.items()} for ref, res in outcomes.items()}
     stored = _store(table, config, source)
     paired = {}
@@ -78,6 +93,7 @@ def _store(table, config, source: str | None) -> dict[str, str]:
         return {}
     from nsl import code_version
     from nsl.catalog import Catalog
+
     from .refs import resolve_init
 
     extra = {"eval": config.to_dict(), "code_version": code_version(), **({"source": source} if source else {})}
@@ -87,7 +103,15 @@ def _store(table, config, source: str | None) -> dict[str, str]:
             entry = resolve_init(cat, ref)
             stored[ref] = entry.id
             for shift, r in table[ref].items():
-                cat.add_evaluation(entry.id, shift, episodes=r.episodes, successes=r.successes, seed=config.seed,
-                                   split=config.split, ci=r.ci, extra=extra)
+                cat.add_evaluation(
+                    entry.id,
+                    shift,
+                    episodes=r.episodes,
+                    successes=r.successes,
+                    seed=config.seed,
+                    split=config.split,
+                    ci=r.ci,
+                    extra=extra,
+                )
             cat.write_model_card(entry.id)
     return stored

@@ -18,9 +18,11 @@ from nsl.errors import ConfigError
 from nsl.eval.config import EarlyStopConfig, EvalConfig
 from nsl.learners.config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_LR_FACTOR, FINE_TUNE_STEPS, TrainConfig
 
-METHOD_HELP = ("ft = fine-tune all parameters of --init (the study's method); scratch = random init; "
-               "new_head = parent's trunk, re-initialised head; pnn = progressive network (frozen parent column "
-               "plus a new one); ft_pnn = pnn whose new column starts as a copy of the parent")
+METHOD_HELP = (
+    "ft = fine-tune all parameters of --init (the study's method); scratch = random init; "
+    "new_head = parent's trunk, re-initialised head; pnn = progressive network (frozen parent column "
+    "plus a new one); ft_pnn = pnn whose new column starts as a copy of the parent"
+)
 
 
 def option(default: Any, help: str, **metadata: Any) -> Any:
@@ -37,14 +39,18 @@ def defaults(cls: type) -> dict[str, Any]:
 
 # --- collect --------------------------------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class CollectConfig:
     """What ``nsl collect`` was asked to do (recorded in the dataset's metadata)."""
 
     shift: str = option(None, "shift spec: base, harsh_lighting, checkerboard_backing@0.5, ...")
     episodes: int = option(None, "total episodes the dataset should hold")
-    policy: str = option(None, "policy: random, oracle[:NOISE] (noise std, e.g. oracle:0.5), or a checkpoint, "
-                               "ckpt:NAME[@STEP] (its CEM policy; see --epsilon)")
+    policy: str = option(
+        None,
+        "policy: random, oracle[:NOISE] (noise std, e.g. oracle:0.5), or a checkpoint, "
+        "ckpt:NAME[@STEP] (its CEM policy; see --epsilon)",
+    )
     data: str = option(None, "name of the dataset to write (an existing name resumes or appends)")
     workers: int = option(1, "simulator processes (the data does not depend on it)")
     seed: int = option(0, "collection seed: episode i is a pure function of (seed, i)")
@@ -53,8 +59,11 @@ class CollectConfig:
     image_size: int = option(64, "camera resolution in pixels")
     episodes_per_file: int = option(100, "episodes per Parquet file, also the resume granularity")
     epsilon: float = option(0.0, "with a ckpt: policy, chance of a random action per step (exploration)")
-    action_noise: float = option(0.0, "with a ckpt: policy, Gaussian noise of this std (action units; 1 unit moves "
-                                      "the wrist 3 cm) added to every action: exploration near what the policy would do")
+    action_noise: float = option(
+        0.0,
+        "with a ckpt: policy, Gaussian noise of this std (action units; 1 unit moves "
+        "the wrist 3 cm) added to every action: exploration near what the policy would do",
+    )
 
     def __post_init__(self) -> None:
         for name in ("shift", "episodes", "policy", "data"):
@@ -71,30 +80,38 @@ class CollectConfig:
         if not 0.0 <= self.action_noise <= 2.0:
             raise ConfigError(f"--action-noise {self.action_noise} must be a standard deviation in [0, 2] action units")
         if self.action_noise > 0 and not (self.policy.startswith("ckpt:") or self.policy == "base"):
-            raise ConfigError(f"--action-noise applies to checkpoint policies (ckpt:NAME), not {self.policy!r}; "
-                              "for the oracle use oracle:NOISE")
+            raise ConfigError(
+                f"--action-noise applies to checkpoint policies (ckpt:NAME), not {self.policy!r}; "
+                "for the oracle use oracle:NOISE"
+            )
         if self.seed < 0:
             raise ConfigError(f"--seed {self.seed} must be non-negative")
 
 
 # --- evaluate -------------------------------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class EvaluateOptions:
     """``nsl eval``: which scenes, how many, how fast (the scenes' defaults are :class:`EvalConfig`'s)."""
 
-    shift: str = option("base", "comma-separated shift specs, or 'all' (base and the five at severity 1), or 'study' "
-                                "(base and the five at the severities calibrated to ckpt:base)")
+    shift: str = option(
+        "base",
+        "comma-separated shift specs, or 'all' (base and the five at severity 1), or 'study' "
+        "(base and the five at the severities calibrated to ckpt:base)",
+    )
     severity: float | None = option(None, "severity for shifts given without @X")
     episodes: int = option(EvalConfig.episodes, "episodes per shift")
     workers: int = option(EvalConfig.workers, "worker processes (the results do not depend on it)")
-    batch_size: int = option(EvalConfig.batch, "environments per worker stepping in lock-step; the policy acts on "
-                                               "them as one batch")
+    batch_size: int = option(
+        EvalConfig.batch, "environments per worker stepping in lock-step; the policy acts on them as one batch"
+    )
     split: str = option(EvalConfig.split, "object split", choices=("train", "test"))
     seed: int = option(EvalConfig.seed, "scene seed: episode i is scene (seed, i), the same for every policy")
 
 
 # --- train ----------------------------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class TrainOptions:
@@ -105,67 +122,111 @@ class TrainOptions:
     learning rate and the parent's n-step returns and crop.
     """
 
-    data: tuple[str, ...] = option((), "dataset NAME[@vN][:TIER] with its share of each batch; repeat for a mix "
-                                       "(default weights equal), e.g. --data grasp-base=0.5 --data grasp-harsh:100=0.5")
+    data: tuple[str, ...] = option(
+        (),
+        "dataset NAME[@vN][:TIER] with its share of each batch; repeat for a mix "
+        "(default weights equal), e.g. --data grasp-base=0.5 --data grasp-harsh:100=0.5",
+    )
     name: str = option(None, "checkpoint name in the catalog (also the run folder)")
     init: str | None = option(None, "parent checkpoint, e.g. ckpt:base or ckpt:run@best")
     method: str | None = option(None, METHOD_HELP + " (default: ft with --init, else scratch)")
-    lr: float | None = option(TrainConfig.lr, f"learning rate (default: 3e-4; fine-tuning: "
-                                              f"{FINE_TUNE_LR_FACTOR:.0%} of the parent's)")
+    lr: float | None = option(
+        TrainConfig.lr, f"learning rate (default: 3e-4; fine-tuning: {FINE_TUNE_LR_FACTOR:.0%} of the parent's)"
+    )
     steps: int | None = option(None, f"gradient steps (required for pre-training; fine-tuning: {FINE_TUNE_STEPS})")
-    lr_decay: int = option(TrainConfig.lr_decay, "cosine-decay the learning rate to 5% of --lr over STEPS steps, "
-                                                 "then keep it there; the late checkpoints then move less from one "
-                                                 "to the next (0 = constant)", metavar="STEPS")
-    weight_decay: float = option(TrainConfig.weight_decay, "L2 penalty on the weights, added to the gradient by Adam",
-                                 metavar="L2")
+    lr_decay: int = option(
+        TrainConfig.lr_decay,
+        "cosine-decay the learning rate to 5% of --lr over STEPS steps, "
+        "then keep it there; the late checkpoints then move less from one "
+        "to the next (0 = constant)",
+        metavar="STEPS",
+    )
+    weight_decay: float = option(
+        TrainConfig.weight_decay, "L2 penalty on the weights, added to the gradient by Adam", metavar="L2"
+    )
     batch_size: int = option(TrainConfig.batch_size, "transitions per gradient step")
-    seed: int = option(TrainConfig.seed, "seed of initialisation, sampling, augmentation and CEM; the same seed "
-                                         "gives the same weights")
-    checkpoint_every: int = option(TrainConfig.checkpoint_every, "steps between checkpoints (a killed run resumes "
-                                                                 "from the last one)")
+    seed: int = option(
+        TrainConfig.seed, "seed of initialisation, sampling, augmentation and CEM; the same seed gives the same weights"
+    )
+    checkpoint_every: int = option(
+        TrainConfig.checkpoint_every, "steps between checkpoints (a killed run resumes from the last one)"
+    )
     no_augment: bool = option(False, "switch image augmentation off")
-    conservative: float | None = option(TrainConfig.conservative, "weight of scoring random actions as failures, "
-                                        "which keeps offline Q values of unseen actions down (0 = plain QT-Opt; "
-                                        f"default: 0 for pre-training, {FINE_TUNE_CONSERVATIVE} for fine-tuning)",
-                                        metavar="ALPHA")
+    conservative: float | None = option(
+        TrainConfig.conservative,
+        "weight of scoring random actions as failures, "
+        "which keeps offline Q values of unseen actions down (0 = plain QT-Opt; "
+        f"default: 0 for pre-training, {FINE_TUNE_CONSERVATIVE} for fine-tuning)",
+        metavar="ALPHA",
+    )
     shrink_perturb: str | tuple[float, float] | None = option(
-        None, "with --init: start from ALPHA * the parent's weights + SIGMA * a fresh initialisation (shrink and "
-              "perturb, Ash and Adams 2020), e.g. 0.8,0.01; recorded in the run's config", metavar="ALPHA,SIGMA")
-    n_step: int | None = option(None, "n-step returns: bootstrap after up to N steps of the data's own actions, so "
-                                      "fewer Bellman maximisations stack up offline (default: 1; fine-tuning: the "
-                                      "parent's)", metavar="N")
-    crop: int | None = option(None, f"random-shift augmentation in pixels (default: {TrainConfig.augment_crop}; "
-                                    "fine-tuning: the parent's; 0 keeps the colour jitter only)", metavar="PIXELS")
-    net: tuple[str, ...] = option((), "architecture for pre-training (a field of NetConfig; repeatable), e.g. --net "
-                                      "pool=spatial --net hidden=32 --net action_dims=0,1,3; fine-tuning keeps the "
-                                      "parent's", metavar="FIELD=VALUE")
+        None,
+        "with --init: start from ALPHA * the parent's weights + SIGMA * a fresh initialisation (shrink and "
+        "perturb, Ash and Adams 2020), e.g. 0.8,0.01; recorded in the run's config",
+        metavar="ALPHA,SIGMA",
+    )
+    n_step: int | None = option(
+        None,
+        "n-step returns: bootstrap after up to N steps of the data's own actions, so "
+        "fewer Bellman maximisations stack up offline (default: 1; fine-tuning: the "
+        "parent's)",
+        metavar="N",
+    )
+    crop: int | None = option(
+        None,
+        f"random-shift augmentation in pixels (default: {TrainConfig.augment_crop}; "
+        "fine-tuning: the parent's; 0 keeps the colour jitter only)",
+        metavar="PIXELS",
+    )
+    net: tuple[str, ...] = option(
+        (),
+        "architecture for pre-training (a field of NetConfig; repeatable), e.g. --net "
+        "pool=spatial --net hidden=32 --net action_dims=0,1,3; fine-tuning keeps the "
+        "parent's",
+        metavar="FIELD=VALUE",
+    )
     eval_every: int = option(0, "steps between evaluations; 0 = no early stopping")
-    eval_episodes: int = option(EarlyStopConfig.episodes, "simulator episodes per evaluation on the target shift "
-                                                          "(0 = offline criteria only)")
-    base_episodes: int = option(EarlyStopConfig.base_episodes, "episodes per evaluation on the base task, to watch "
-                                                               "forgetting (0 = skip)")
+    eval_episodes: int = option(
+        EarlyStopConfig.episodes, "simulator episodes per evaluation on the target shift (0 = offline criteria only)"
+    )
+    base_episodes: int = option(
+        EarlyStopConfig.base_episodes, "episodes per evaluation on the base task, to watch forgetting (0 = skip)"
+    )
     target_shift: str | None = option(None, "shift to evaluate on (default: the last dataset's shift)")
     patience: int = option(EarlyStopConfig.patience, "evaluations without improvement before stopping")
-    criterion: str = option(EarlyStopConfig.criterion, "what early stopping follows: eval = simulator success on the "
-                            "target shift; softopc, auc = Q-values of held-out target episodes (higher is better); "
-                            "td = TD error on held-out target transitions (lower is better); the offline ones need "
-                            "no simulator")
-    holdout: float = option(EarlyStopConfig.held_out, "fraction of the last dataset's episodes held out (its last "
-                                                      "ones) for the offline criteria")
-    eval_scenes: int = option(EarlyStopConfig.seed, "the scenes of every evaluation, those of `nsl eval --seed SEED`: "
-                              f"by default the selection scenes ({EarlyStopConfig.seed}), so the chosen step is "
-                              "reported on others", metavar="SEED")
+    criterion: str = option(
+        EarlyStopConfig.criterion,
+        "what early stopping follows: eval = simulator success on the "
+        "target shift; softopc, auc = Q-values of held-out target episodes (higher is better); "
+        "td = TD error on held-out target transitions (lower is better); the offline ones need "
+        "no simulator",
+    )
+    holdout: float = option(
+        EarlyStopConfig.held_out,
+        "fraction of the last dataset's episodes held out (its last ones) for the offline criteria",
+    )
+    eval_scenes: int = option(
+        EarlyStopConfig.seed,
+        "the scenes of every evaluation, those of `nsl eval --seed SEED`: "
+        f"by default the selection scenes ({EarlyStopConfig.seed}), so the chosen step is "
+        "reported on others",
+        metavar="SEED",
+    )
     workers: int = option(1, "evaluation worker processes")
 
 
 # --- continual and efficiency ---------------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class ContinualConfig:
     """One continual run; saved as RUN/config.json."""
 
-    sequence: tuple[str, ...] = option((), "comma-separated shifts, e.g. harsh_lighting,transparent_objects,"
-                                           "checkerboard_backing,extend_gripper,offset_gripper")
+    sequence: tuple[str, ...] = option(
+        (),
+        "comma-separated shifts, e.g. harsh_lighting,transparent_objects,"
+        "checkerboard_backing,extend_gripper,offset_gripper",
+    )
     init: str = option("ckpt:base", "starting checkpoint")
     base_data: str = option("grasp-base", "base dataset mixed 50/50 into every stage", metavar="REF")
     episodes: int = option(800, "attempts collected per stage")
@@ -181,10 +242,13 @@ class ContinualConfig:
 class EfficiencyConfig:
     """One sample-efficiency run; saved as RUN/config.json."""
 
-    data: tuple[str, ...] = option((), "target dataset NAME[@vN] whose first-K tiers are used; repeat for one row "
-                                       "per shift")
-    sizes: tuple[int, ...] = option((25, 50, 100, 200, 400, 800), "comma-separated tier sizes (target episodes); "
-                                    "sizes above a dataset's size are skipped")
+    data: tuple[str, ...] = option(
+        (), "target dataset NAME[@vN] whose first-K tiers are used; repeat for one row per shift"
+    )
+    sizes: tuple[int, ...] = option(
+        (25, 50, 100, 200, 400, 800),
+        "comma-separated tier sizes (target episodes); sizes above a dataset's size are skipped",
+    )
     init: str = option("ckpt:base", "checkpoint every fine-tune starts from")
     base_data: str = option("grasp-base", "base dataset mixed 50/50 into each fine-tune", metavar="REF")
     steps: int = option(FINE_TUNE_STEPS, "gradient steps per fine-tune (the fine-tuning recipe's)")
@@ -194,5 +258,12 @@ class EfficiencyConfig:
     scratch: bool = option(False, "also train from scratch on the largest tier's mix (a comparison column)")
 
 
-__all__ = ["CollectConfig", "ContinualConfig", "EfficiencyConfig", "EvaluateOptions", "TrainOptions", "defaults",
-           "option"]
+__all__ = [
+    "CollectConfig",
+    "ContinualConfig",
+    "EfficiencyConfig",
+    "EvaluateOptions",
+    "TrainOptions",
+    "defaults",
+    "option",
+]

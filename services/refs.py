@@ -27,8 +27,13 @@ def policy_factory(ref: str, env_config, epsilon: float = 0.0, action_noise: flo
     else:
         from nsl.collectors import scripted_policy
 
-        factory = functools.partial(scripted_policy, ref, control=env_config.control, move_step=env_config.move_step,
-                                    yaw_step=env_config.yaw_step)
+        factory = functools.partial(
+            scripted_policy,
+            ref,
+            control=env_config.control,
+            move_step=env_config.move_step,
+            yaw_step=env_config.yaw_step,
+        )
     factory()  # validate the reference now, before any worker starts
     return factory
 
@@ -54,9 +59,15 @@ def dataset_uses(cat, mix: list[tuple[str, float]]) -> list:
 def register_dataset(cat, version) -> None:
     """Record a dataset version (``nsl.datasets`` DatasetVersion) in the catalog; idempotent."""
     spec = version.provenance["collections"][-1]["spec"]
-    cat.register_dataset(version.name, version.version, version.root, hash=version.hash,
-                         shift=spec.get("env", {}).get("shift_spec", spec.get("env", {}).get("shift", "base")),
-                         episodes=version.num_episodes, provenance=version.provenance)
+    cat.register_dataset(
+        version.name,
+        version.version,
+        version.root,
+        hash=version.hash,
+        shift=spec.get("env", {}).get("shift_spec", spec.get("env", {}).get("shift", "base")),
+        episodes=version.num_episodes,
+        provenance=version.provenance,
+    )
 
 
 def resolve_init(cat, ref: str):
@@ -75,8 +86,10 @@ def transfer_matrix(matrix=None, transfer: str | None = None):
 
     path = workspace.home() / "transfers" / str(transfer) / "matrix.json"
     if not path.is_file():
-        raise UnknownReferenceError(f"transfer {transfer!r} has no matrix in {workspace.home()}; run "
-                                    f"`nsl transfer run PLAN` (or `nsl transfer report {transfer}`) first")
+        raise UnknownReferenceError(
+            f"transfer {transfer!r} has no matrix in {workspace.home()}; run "
+            f"`nsl transfer run PLAN` (or `nsl transfer report {transfer}`) first"
+        )
     return path
 
 
@@ -95,7 +108,9 @@ def open_run(name: str, config):
     run_dir.mkdir(parents=True, exist_ok=True)
     path = run_dir / "config.json"
     if path.exists() and json.loads(path.read_text()) != json.loads(json.dumps(asdict(config))):
-        raise ConfigError(f"run {name!r} exists with a different configuration ({path}); "
-                          "use another --name or the same options to resume")
+        raise ConfigError(
+            f"run {name!r} exists with a different configuration ({path}); "
+            "use another --name or the same options to resume"
+        )
     workspace.atomic_write_json(path, asdict(config))
     return run_dir

@@ -24,13 +24,16 @@ CHUNK = 512  # transitions per batched Q-value call
 
 def q_values(policy: Any, obs: dict[str, np.ndarray], actions: np.ndarray, chunk: int = CHUNK) -> np.ndarray:
     """The policy's Q-values of ``actions`` in ``obs``, in chunks of ``chunk`` transitions."""
-    parts = [policy.q_values({k: v[i:i + chunk] for k, v in obs.items()}, actions[i:i + chunk])
-             for i in range(0, len(actions), chunk)]
+    parts = [
+        policy.q_values({k: v[i : i + chunk] for k, v in obs.items()}, actions[i : i + chunk])
+        for i in range(0, len(actions), chunk)
+    ]
     return np.concatenate(parts) if parts else np.zeros(0, dtype=np.float32)
 
 
-def offline_scorer(view: Any, gamma: float, criterion: str | None = None, *,
-                   td: bool = True) -> Callable[[Any], dict[str, float]]:
+def offline_scorer(
+    view: Any, gamma: float, criterion: str | None = None, *, td: bool = True
+) -> Callable[[Any], dict[str, float]]:
     """``policy -> {"softopc", "auc", "td_error"}`` on the held-out ``view``.
 
     Every score that is defined is returned: SoftOPC and AUC need both

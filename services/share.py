@@ -51,10 +51,13 @@ def push(ref: str, dest: str) -> Pushed:
     elif ref.startswith("ckpt:"):
         result, what = _push_checkpoint(ref, dest)
     else:
-        raise ConfigError(f"push reference {ref!r} needs a prefix: data:NAME@vN for a dataset version or "
-                          "ckpt:NAME@STEP for a checkpoint")
-    return Pushed(what, result.url, result.revision, tuple(result.tags), tuple(result.uploaded),
-                  tuple(result.unchanged))
+        raise ConfigError(
+            f"push reference {ref!r} needs a prefix: data:NAME@vN for a dataset version or "
+            "ckpt:NAME@STEP for a checkpoint"
+        )
+    return Pushed(
+        what, result.url, result.revision, tuple(result.tags), tuple(result.uploaded), tuple(result.unchanged)
+    )
 
 
 def _push_dataset(ref: str, dest: str):
@@ -65,29 +68,43 @@ def _push_dataset(ref: str, dest: str):
     view = api.open_view(ref)
     v = view.version
     if view.num_episodes != v.num_episodes:
-        raise ConfigError(f"{ref} is a tier; push whole versions (data:{v.ref}), or write the tier as its own "
-                          f"dataset with `nsl dataset export {ref} --out DIR`")
+        raise ConfigError(
+            f"{ref} is a tier; push whole versions (data:{v.ref}), or write the tier as its own "
+            f"dataset with `nsl dataset export {ref} --out DIR`"
+        )
     api.verify(v.ref)  # publish only what still matches its manifest
     spec = v.provenance["collections"][-1]["spec"]
     env = spec.get("env", {})
-    card = dataset_card(name=v.name, version=v.version, content_hash=v.hash, episodes=v.num_episodes,
-                        frames=v.num_frames, success_rate=view.success_rate, shift=str(env.get("shift", "base")),
-                        policy=str(spec.get("policy_ref", "?")), env_version=str(env.get("env_version", "?")),
-                        codebase_version=api.layout.CODEBASE_VERSION, provenance=v.provenance)
+    card = dataset_card(
+        name=v.name,
+        version=v.version,
+        content_hash=v.hash,
+        episodes=v.num_episodes,
+        frames=v.num_frames,
+        success_rate=view.success_rate,
+        shift=str(env.get("shift", "base")),
+        policy=str(spec.get("policy_ref", "?")),
+        env_version=str(env.get("env_version", "?")),
+        codebase_version=api.layout.CODEBASE_VERSION,
+        provenance=v.provenance,
+    )
     return push_dataset(v.root, name=v.name, version=v.version, dest=dest, card=card), f"data:{v.ref}"
 
 
 def _push_checkpoint(ref: str, dest: str):
     from nsl.catalog import Catalog, folder_checkpoint_id, published_lineage, render_model_card
     from nsl.errors import CorruptDataError, UnknownReferenceError
-    from .refs import resolve_init
     from nsl.share import push_checkpoint
+
+    from .refs import resolve_init
 
     with Catalog() as cat:
         entry = resolve_init(cat, ref)
         if folder_checkpoint_id(Path(entry.path)) != entry.id:
-            raise CorruptDataError(f"checkpoint {entry.path} no longer matches its catalog id {entry.short_id}; "
-                                   "run `nsl catalog verify` and restore it before pushing")
+            raise CorruptDataError(
+                f"checkpoint {entry.path} no longer matches its catalog id {entry.short_id}; "
+                "run `nsl catalog verify` and restore it before pushing"
+            )
         datasets = {}
         for u in entry.data:
             try:
@@ -95,10 +112,16 @@ def _push_checkpoint(ref: str, dest: str):
             except UnknownReferenceError:
                 pass
         published = published_lineage(cat, entry)
-        card = render_model_card(entry, cat.lineage(entry.id)[1:], datasets, cat.evaluations(entry.id),
-                                 {"published": published})
-    checkpoint = {"id": entry.id, "name": entry.name, "step": entry.step, "shift": entry.shift,
-                  "code_version": entry.code_version}
+        card = render_model_card(
+            entry, cat.lineage(entry.id)[1:], datasets, cat.evaluations(entry.id), {"published": published}
+        )
+    checkpoint = {
+        "id": entry.id,
+        "name": entry.name,
+        "step": entry.step,
+        "shift": entry.shift,
+        "code_version": entry.code_version,
+    }
     result = push_checkpoint(Path(entry.path), dest=dest, card=card, checkpoint=checkpoint, lineage=published)
     return result, f"ckpt:{entry.ref} ({entry.short_id})"
 
@@ -129,12 +152,15 @@ def _place_dataset(cat, pulled, as_name: str | None) -> str:
     from nsl.datasets import api
     from nsl.datasets.versions import hash_of
     from nsl.errors import ConfigError, CorruptDataError
+
     from .refs import register_dataset
 
     m = pulled.manifest
     if hash_of(m["files"]) != m["hash"]:
-        raise CorruptDataError(f"{pulled.url}: manifest.json records hash {m['hash']} that does not match its "
-                               "file list; the remote is damaged, ask for it to be pushed again")
+        raise CorruptDataError(
+            f"{pulled.url}: manifest.json records hash {m['hash']} that does not match its "
+            "file list; the remote is damaged, ask for it to be pushed again"
+        )
     name = api.parse_ref(as_name or pulled.location.name).name
     staged = api.DatasetVersion(name, pulled.version, pulled.folder)
     staged.episodes  # noqa: B018  # the metadata must agree with info.json before anything is placed
@@ -142,16 +168,24 @@ def _place_dataset(cat, pulled, as_name: str | None) -> str:
     if target.exists():
         here = api.open_version(f"{name}@v{pulled.version}")
         if here.hash != m["hash"]:
-            raise ConfigError(f"dataset {name}@v{pulled.version} already exists here with hash {here.hash}, the "
-                              f"pulled one is {m['hash']}; pull it under another name with --as NAME")
+            raise ConfigError(
+                f"dataset {name}@v{pulled.version} already exists here with hash {here.hash}, the "
+                f"pulled one is {m['hash']}; pull it under another name with --as NAME"
+            )
     else:
         target.parent.mkdir(parents=True, exist_ok=True)
         os.rename(pulled.folder, target)
     version = api.open_version(f"{name}@v{pulled.version}")
     register_dataset(cat, version)
-    record_origin(cat, "dataset", version.ref, hash=version.hash, url=pulled.url, revision=pulled.revision,
-                  published={"name": pulled.location.name, "version": pulled.version,
-                             "requested": str(pulled.location)})
+    record_origin(
+        cat,
+        "dataset",
+        version.ref,
+        hash=version.hash,
+        url=pulled.url,
+        revision=pulled.revision,
+        published={"name": pulled.location.name, "version": pulled.version, "requested": str(pulled.location)},
+    )
     return f"data:{version.ref} ({version.hash})"
 
 
@@ -165,11 +199,17 @@ def _place_checkpoint(cat, pulled, as_name: str | None) -> str:
     ck, lineage = m["checkpoint"], list(m.get("lineage") or [])
     cid = folder_checkpoint_id(pulled.folder)
     if cid != ck.get("id"):
-        raise CorruptDataError(f"{pulled.url}: the pulled files make checkpoint id {cid[:12]}, the manifest says "
-                               f"{str(ck.get('id'))[:12]}; the remote is inconsistent, ask for it to be pushed again")
+        raise CorruptDataError(
+            f"{pulled.url}: the pulled files make checkpoint id {cid[:12]}, the manifest says "
+            f"{str(ck.get('id'))[:12]}; the remote is inconsistent, ask for it to be pushed again"
+        )
     load_checkpoint(pulled.folder)  # its config and weights must load before it is registered
-    origin = {"hash": cid, "url": pulled.url, "revision": pulled.revision,
-              "published": {"checkpoint": ck, "lineage": lineage, "requested": str(pulled.location)}}
+    origin = {
+        "hash": cid,
+        "url": pulled.url,
+        "revision": pulled.revision,
+        "published": {"checkpoint": ck, "lineage": lineage, "requested": str(pulled.location)},
+    }
     try:
         entry = cat.checkpoint(cid)
     except UnknownReferenceError:
@@ -199,10 +239,15 @@ def _place_checkpoint(cat, pulled, as_name: str | None) -> str:
     dest.parent.mkdir(parents=True, exist_ok=True)
     os.rename(pulled.folder, dest)
     try:
-        entry = cat.register_checkpoint(dest, name=name, step=step, parent=parent, data=uses,
-                                        shift=ck.get("shift") or node.get("shift"),
-                                        card_info={"summary": f"Pulled from {pulled.url} (revision "
-                                                              f"{pulled.revision}).", "published": lineage})
+        entry = cat.register_checkpoint(
+            dest,
+            name=name,
+            step=step,
+            parent=parent,
+            data=uses,
+            shift=ck.get("shift") or node.get("shift"),
+            card_info={"summary": f"Pulled from {pulled.url} (revision {pulled.revision}).", "published": lineage},
+        )
     except BaseException:
         os.rename(dest, pulled.folder)  # back to staging: nothing half-registered stays in the workspace
         raise

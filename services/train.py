@@ -115,7 +115,8 @@ def check_env_version(view) -> None:
         if got is not None and got != ENV_VERSION:
             raise IncompatibleVersionError(
                 f"dataset {view.version.ref} was collected in environment {got}, but this nsl simulates "
-                f"{ENV_VERSION} (wrist camera, 7 cm jaw); collect it again, or set NSL_HOME to a new workspace")
+                f"{ENV_VERSION} (wrist camera, 7 cm jaw); collect it again, or set NSL_HOME to a new workspace"
+            )
 
 
 def view_shift(view) -> str:
@@ -124,9 +125,16 @@ def view_shift(view) -> str:
     return spec.get("env", {}).get("shift", "base")
 
 
-def train(options: TrainOptions, *, progress: bool = True, record: Mapping[str, Any] | None = None,
-          offline: bool | None = None, stop: bool = True, source: str = "early stopping",
-          quiet: bool = False) -> TrainResult:
+def train(
+    options: TrainOptions,
+    *,
+    progress: bool = True,
+    record: Mapping[str, Any] | None = None,
+    offline: bool | None = None,
+    stop: bool = True,
+    source: str = "early stopping",
+    quiet: bool = False,
+) -> TrainResult:
     """Train (or resume) run ``options.name`` and catalogue its checkpoints.
 
     ``record`` adds fields to the run's ``command.json`` (``argv`` replaces
@@ -150,9 +158,11 @@ def train(options: TrainOptions, *, progress: bool = True, record: Mapping[str, 
     steps = o.steps
     if steps is None:
         if not o.init:
-            raise ConfigError("--steps is required for pre-training; give the number of gradient steps, e.g. "
-                              "--steps 20000 (fine-tuning with --init defaults to the recipe's "
-                              f"{learner_config.FINE_TUNE_STEPS})")
+            raise ConfigError(
+                "--steps is required for pre-training; give the number of gradient steps, e.g. "
+                "--steps 20000 (fine-tuning with --init defaults to the recipe's "
+                f"{learner_config.FINE_TUNE_STEPS})"
+            )
         steps = learner_config.FINE_TUNE_STEPS
     if steps < 1:
         raise ConfigError(f"--steps {steps} must be at least 1")
@@ -164,8 +174,10 @@ def train(options: TrainOptions, *, progress: bool = True, record: Mapping[str, 
     sp = parse_shrink_perturb(o.shrink_perturb, o.init)
     net_config = parse_net(list(o.net))
     if net_config is not None and o.init:
-        raise ConfigError("--net sets the architecture of a new network; with --init the parent's is kept "
-                          "(drop --net, or drop --init to pre-train)")
+        raise ConfigError(
+            "--net sets the architecture of a new network; with --init the parent's is kept "
+            "(drop --net, or drop --init to pre-train)"
+        )
     with Catalog() as cat:
         from .refs import dataset_uses, resolve_init
 
@@ -186,25 +198,63 @@ def train(options: TrainOptions, *, progress: bool = True, record: Mapping[str, 
     inherited = inherited_settings(parent.path) if parent else {}  # a fine-tune keeps the parent's n-step and crop
     n_step = o.n_step if o.n_step is not None else inherited.get("n_step", 1)
     crop = o.crop if o.crop is not None else inherited.get("augment_crop")
-    augment: dict[str, Any] = {"augment_crop": 0, "augment_colour": 0.0} if o.no_augment else (
-        {"augment_crop": crop} if crop is not None else {})
-    config = TrainConfig(steps=steps, batch_size=o.batch_size, lr=o.lr, seed=o.seed,
-                         checkpoint_every=min(o.checkpoint_every, steps), eval_every=o.eval_every,
-                         conservative=o.conservative, n_step=n_step, lr_decay=o.lr_decay,
-                         weight_decay=o.weight_decay, shrink_perturb=sp, **augment)
+    augment: dict[str, Any] = (
+        {"augment_crop": 0, "augment_colour": 0.0}
+        if o.no_augment
+        else ({"augment_crop": crop} if crop is not None else {})
+    )
+    config = TrainConfig(
+        steps=steps,
+        batch_size=o.batch_size,
+        lr=o.lr,
+        seed=o.seed,
+        checkpoint_every=min(o.checkpoint_every, steps),
+        eval_every=o.eval_every,
+        conservative=o.conservative,
+        n_step=n_step,
+        lr_decay=o.lr_decay,
+        weight_decay=o.weight_decay,
+        shrink_perturb=sp,
+        **augment,
+    )
     sampler = api.make_sampler(sources, n_step=config.n_step, gamma=config.gamma)
     run_dir = workspace.runs_dir() / o.name
     run_dir.mkdir(parents=True, exist_ok=True)
-    workspace.atomic_write_json(run_dir / "command.json", {
-        "argv": sys.argv, "options": _jsonable(asdict(o)), "data": [u.__dict__ for u in uses],
-        "init": parent.id if parent else None, "target_shift": target_shift, "code_version": code_version(),
-        **(dict(record) if record else {})})
+    workspace.atomic_write_json(
+        run_dir / "command.json",
+        {
+            "argv": sys.argv,
+            "options": _jsonable(asdict(o)),
+            "data": [u.__dict__ for u in uses],
+            "init": parent.id if parent else None,
+            "target_shift": target_shift,
+            "code_version": code_version(),
+            **(dict(record) if record else {}),
+        },
+    )
 
-    monitor = _monitor(o, run_dir, target_shift, held_out, gamma=config.gamma,
-                       patience=o.patience if stop else steps // o.eval_every + 2) if o.eval_every else None
-    result = train_learner(config, sampler, run_dir, init_checkpoint=parent.path if parent else None, method=o.method,
-                           eval_fn=monitor, progress=progress,
-                           **({"net": net_config} if net_config is not None else {}))
+    monitor = (
+        _monitor(
+            o,
+            run_dir,
+            target_shift,
+            held_out,
+            gamma=config.gamma,
+            patience=o.patience if stop else steps // o.eval_every + 2,
+        )
+        if o.eval_every
+        else None
+    )
+    result = train_learner(
+        config,
+        sampler,
+        run_dir,
+        init_checkpoint=parent.path if parent else None,
+        method=o.method,
+        eval_fn=monitor,
+        progress=progress,
+        **({"net": net_config} if net_config is not None else {}),
+    )
     with Catalog() as cat:
         if monitor is not None:
             register_evaluated(cat, o.name, run_dir, parent, uses, target_shift, monitor.config.seed, source)
@@ -238,8 +288,15 @@ def _monitor(o: TrainOptions, run_dir: Path, target_shift: str, held_out, *, gam
 
     from .scoring import offline_scorer
 
-    cfg = EarlyStopConfig(every=o.eval_every, episodes=o.eval_episodes, base_episodes=o.base_episodes,
-                          patience=patience, criterion=o.criterion, held_out=o.holdout, seed=o.eval_scenes)
+    cfg = EarlyStopConfig(
+        every=o.eval_every,
+        episodes=o.eval_episodes,
+        base_episodes=o.base_episodes,
+        patience=patience,
+        criterion=o.criterion,
+        held_out=o.holdout,
+        seed=o.eval_scenes,
+    )
     score_target = score_base = None
     if o.eval_episodes:
         score_target = simulator_scorer(parse_shift(target_shift), cfg.eval_config(workers=o.workers))
@@ -252,12 +309,20 @@ def _monitor(o: TrainOptions, run_dir: Path, target_shift: str, held_out, *, gam
 def register_checkpoint(cat, name: str, folder: Path, parent, uses, shift: str):
     """Catalogue one checkpoint folder of run ``name`` (its step from its config) with parent, data and shift."""
     config = json.loads((Path(folder) / "config.json").read_text())
-    return cat.save_checkpoint(name, int(config.get("step", 0)), Path(folder) / "model.safetensors", config,
-                               parent=parent.id if parent else None, data=uses, shift=shift)
+    return cat.save_checkpoint(
+        name,
+        int(config.get("step", 0)),
+        Path(folder) / "model.safetensors",
+        config,
+        parent=parent.id if parent else None,
+        data=uses,
+        shift=shift,
+    )
 
 
-def register_evaluated(cat, name: str, run_dir: Path, parent, uses, shift: str, seed: int,
-                       source: str = "early stopping") -> None:
+def register_evaluated(
+    cat, name: str, run_dir: Path, parent, uses, shift: str, seed: int, source: str = "early stopping"
+) -> None:
     """Catalogue every evaluated checkpoint (so ckpt:NAME@STEP resolves) with its simulator evaluations.
 
     ``ckpt:NAME@best`` follows the simulator evaluations.
@@ -271,5 +336,11 @@ def register_evaluated(cat, name: str, run_dir: Path, parent, uses, shift: str, 
         entry = register_checkpoint(cat, name, folder, parent, uses, shift)
         for task, r in ((shift, row.target), ("base", row.base)):
             if r is not None and r.episodes:
-                cat.add_evaluation(entry.id, task, episodes=r.episodes, successes=round(r.success_rate * r.episodes),
-                                   seed=seed, extra={"source": source, "step": row.step})
+                cat.add_evaluation(
+                    entry.id,
+                    task,
+                    episodes=r.episodes,
+                    successes=round(r.success_rate * r.episodes),
+                    seed=seed,
+                    extra={"source": source, "step": row.step},
+                )

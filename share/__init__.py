@@ -22,5 +22,13 @@ from .cards import dataset_card
 from .remotes import Location, parse_remote
 from .transfer import Pulled, PushResult, pull, push_checkpoint, push_dataset
 
-__all__ = ["Location", "PushResult", "Pulled", "dataset_card", "parse_remote", "pull", "push_checkpoint",
-           "push_dataset"]
+__all__ = [
+    "Location",
+    "PushResult",
+    "Pulled",
+    "dataset_card",
+    "parse_remote",
+    "pull",
+    "push_checkpoint",
+    "push_dataset",
+]

@@ -16,17 +16,39 @@ from typing import Any
 DATA_FILES = "data/*/*.parquet"
 
 
-def dataset_card(*, name: str, version: int, content_hash: str, episodes: int, frames: int, success_rate: float,
-                 shift: str, policy: str, env_version: str, codebase_version: str, provenance: dict[str, Any],
-                 license_id: str = "apache-2.0") -> str:
+def dataset_card(
+    *,
+    name: str,
+    version: int,
+    content_hash: str,
+    episodes: int,
+    frames: int,
+    success_rate: float,
+    shift: str,
+    policy: str,
+    env_version: str,
+    codebase_version: str,
+    provenance: dict[str, Any],
+    license_id: str = "apache-2.0",
+) -> str:
     """The card text of dataset ``name`` version ``version``."""
     from huggingface_hub import DatasetCardData
 
     data = DatasetCardData(
-        license=license_id, task_categories=["robotics"], tags=["LeRobot", "nsl", "grasping", shift],
+        license=license_id,
+        task_categories=["robotics"],
+        tags=["LeRobot", "nsl", "grasping", shift],
         configs=[{"config_name": "default", "data_files": DATA_FILES}],
-        nsl={"name": name, "version": version, "content_hash": content_hash, "shift": shift, "policy": policy,
-             "env_version": env_version, "episodes": episodes, "success_rate": round(success_rate, 4)},
+        nsl={
+            "name": name,
+            "version": version,
+            "content_hash": content_hash,
+            "shift": shift,
+            "policy": policy,
+            "env_version": env_version,
+            "episodes": episodes,
+            "success_rate": round(success_rate, 4),
+        },
     )
     body = f"""# {name} v{version}
 

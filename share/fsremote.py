@@ -33,8 +33,10 @@ class FsRemote:
         try:
             self.fs, self.root = fsspec.core.url_to_fs(loc.url)
         except ImportError as e:
-            raise EnvironmentSetupError(f"remote {loc.url}: its file system needs a package that is not installed "
-                                        f"({e}); for S3 install nsl[s3] (s3fs)") from None
+            raise EnvironmentSetupError(
+                f"remote {loc.url}: its file system needs a package that is not installed "
+                f"({e}); for S3 install nsl[s3] (s3fs)"
+            ) from None
         except ValueError as e:
             raise ConfigError(f"remote {loc.url} is not a URL fsspec understands ({e})") from None
         self.root = self.root.rstrip("/")
@@ -65,8 +67,10 @@ class FsRemote:
 
     def _missing_bucket(self, what: str) -> UnknownReferenceError:
         bucket = self.root.split("/", 1)[0]
-        return UnknownReferenceError(f"remote {self.url}: bucket {bucket!r} does not exist (while {what}); check the "
-                                     "URL, or create the bucket and push to it")
+        return UnknownReferenceError(
+            f"remote {self.url}: bucket {bucket!r} does not exist (while {what}); check the "
+            "URL, or create the bucket and push to it"
+        )
 
     def read_bytes(self, rel: str) -> bytes | None:
         """A small file's bytes, or None when it does not exist."""
@@ -130,14 +134,45 @@ class FsRemote:
 # ----------------------------------------------------------------- errors
 # Exceptions of these libraries come from the store (its client, its HTTP stack); others are bugs and keep
 # their traceback.
-_STORE_MODULES = ("botocore", "aiobotocore", "boto3", "s3fs", "aiohttp", "urllib3", "requests", "gcsfs", "google",
-                  "adlfs", "azure", "fsspec", "ssl", "socket")
-_NO_CREDENTIALS = ("NoCredentialsError", "PartialCredentialsError", "CredentialRetrievalError",
-                   "UnauthorizedSSOTokenError", "SSOTokenLoadError", "NoAuthTokenError", "DefaultCredentialsError",
-                   "ClientAuthenticationError")
-_UNREACHABLE = ("EndpointConnectionError", "ConnectTimeoutError", "ReadTimeoutError", "ConnectionClosedError",
-                "ProxyConnectionError", "SSLError", "ClientConnectorError", "ServerDisconnectedError",
-                "ServerTimeoutError", "ClientOSError", "ServiceRequestError")
+_STORE_MODULES = (
+    "botocore",
+    "aiobotocore",
+    "boto3",
+    "s3fs",
+    "aiohttp",
+    "urllib3",
+    "requests",
+    "gcsfs",
+    "google",
+    "adlfs",
+    "azure",
+    "fsspec",
+    "ssl",
+    "socket",
+)
+_NO_CREDENTIALS = (
+    "NoCredentialsError",
+    "PartialCredentialsError",
+    "CredentialRetrievalError",
+    "UnauthorizedSSOTokenError",
+    "SSOTokenLoadError",
+    "NoAuthTokenError",
+    "DefaultCredentialsError",
+    "ClientAuthenticationError",
+)
+_UNREACHABLE = (
+    "EndpointConnectionError",
+    "ConnectTimeoutError",
+    "ReadTimeoutError",
+    "ConnectionClosedError",
+    "ProxyConnectionError",
+    "SSLError",
+    "ClientConnectorError",
+    "ServerDisconnectedError",
+    "ServerTimeoutError",
+    "ClientOSError",
+    "ServiceRequestError",
+)
 
 
 def _names(e: BaseException) -> set[str]:
@@ -176,8 +211,7 @@ def _first_line(e: BaseException) -> str:
 
 def _credentials_hint(url: str) -> str:
     if url.startswith(("s3://", "s3a://")):
-        return ("set AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY, or AWS_PROFILE with a profile in "
-                "~/.aws/credentials")
+        return "set AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY, or AWS_PROFILE with a profile in ~/.aws/credentials"
     return "configure the store's credentials (fsspec's configuration, or the store's usual place)"
 
 
@@ -189,21 +223,35 @@ def remote_error(url: str, what: str, e: BaseException) -> NslError | None:
     names = set().union(*(_names(x) for x in _chain(e)))
     detail = f"{type(e).__name__}: {_first_line(e)}"
     if names & set(_NO_CREDENTIALS):
-        return EnvironmentSetupError(f"remote {url}: no credentials for the store (while {what}: {detail}); "
-                                     f"{_credentials_hint(url)}, then run the command again")
-    if isinstance(e, PermissionError) or _code(e) in ("AccessDenied", "InvalidAccessKeyId", "SignatureDoesNotMatch",
-                                                      "ExpiredToken", "AllAccessDisabled"):
+        return EnvironmentSetupError(
+            f"remote {url}: no credentials for the store (while {what}: {detail}); "
+            f"{_credentials_hint(url)}, then run the command again"
+        )
+    if isinstance(e, PermissionError) or _code(e) in (
+        "AccessDenied",
+        "InvalidAccessKeyId",
+        "SignatureDoesNotMatch",
+        "ExpiredToken",
+        "AllAccessDisabled",
+    ):
         if url.startswith("file://"):
-            return ConfigError(f"remote {url}: permission denied while {what} ({_first_line(e)}); check the "
-                               "folder's permissions")
-        return ConfigError(f"remote {url}: permission denied while {what} ({_first_line(e)}); use credentials "
-                           f"this remote grants access to ({_credentials_hint(url)}), or ask its owner for access")
+            return ConfigError(
+                f"remote {url}: permission denied while {what} ({_first_line(e)}); check the folder's permissions"
+            )
+        return ConfigError(
+            f"remote {url}: permission denied while {what} ({_first_line(e)}); use credentials "
+            f"this remote grants access to ({_credentials_hint(url)}), or ask its owner for access"
+        )
     if names & set(_UNREACHABLE) or any(isinstance(x, (ConnectionError, TimeoutError)) for x in _chain(e)):
-        return EnvironmentSetupError(f"remote {url}: cannot reach the store while {what} ({detail}); check the "
-                                     "network and the store's endpoint (for S3: AWS_ENDPOINT_URL or fsspec's "
-                                     "s3 client_kwargs.endpoint_url), then run the command again")
+        return EnvironmentSetupError(
+            f"remote {url}: cannot reach the store while {what} ({detail}); check the "
+            "network and the store's endpoint (for S3: AWS_ENDPOINT_URL or fsspec's "
+            "s3 client_kwargs.endpoint_url), then run the command again"
+        )
     from_store = any(type(x).__module__.split(".")[0] in _STORE_MODULES for x in _chain(e))
     if isinstance(e, OSError) or from_store:
-        return ConfigError(f"remote {url}: {what} failed ({detail}); check the URL and the store's configuration, "
-                           "then run the command again")
+        return ConfigError(
+            f"remote {url}: {what} failed ({detail}); check the URL and the store's configuration, "
+            "then run the command again"
+        )
     return None

@@ -18,7 +18,11 @@ from pathlib import Path
 
 from huggingface_hub import CommitOperationAdd, CommitOperationDelete, HfApi, hf_hub_download
 from huggingface_hub.errors import (
-    EntryNotFoundError, GatedRepoError, HfHubHTTPError, LocalEntryNotFoundError, RepositoryNotFoundError,
+    EntryNotFoundError,
+    GatedRepoError,
+    HfHubHTTPError,
+    LocalEntryNotFoundError,
+    RepositoryNotFoundError,
     RevisionNotFoundError,
 )
 
@@ -45,7 +49,8 @@ class HubRemote:
         if isinstance(e, (RepositoryNotFoundError, GatedRepoError)) or status in (401, 403):
             return UnknownReferenceError(
                 f"{self.url}: {what} failed: the repository does not exist or this account may not access it "
-                "(log in with `hf auth login` or set HF_TOKEN)")
+                "(log in with `hf auth login` or set HF_TOKEN)"
+            )
         if isinstance(e, RevisionNotFoundError):
             return UnknownReferenceError(f"{self.url}: {what} failed: no such revision")
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
@@ -91,8 +96,9 @@ class HubRemote:
 
     # ------------------------------------------------------------ content
     def _download(self, rel: str, revision: str, into: Path) -> Path:
-        return Path(hf_hub_download(self.repo_id, rel, repo_type=self.repo_type, revision=revision,
-                                    local_dir=str(into)))
+        return Path(
+            hf_hub_download(self.repo_id, rel, repo_type=self.repo_type, revision=revision, local_dir=str(into))
+        )
 
     def read_json(self, rel: str, revision: str) -> dict | None:
         """A small JSON file at ``revision``, or None when the file is not there."""
@@ -129,12 +135,15 @@ class HubRemote:
 
     def commit(self, files: dict[str, Path | bytes], delete: list[str], message: str) -> str:
         """One commit on ``main`` adding ``files`` and deleting ``delete``; returns its id."""
-        ops = [CommitOperationAdd(path_in_repo=rel, path_or_fileobj=src if isinstance(src, bytes) else str(src))
-               for rel, src in sorted(files.items())]
+        ops = [
+            CommitOperationAdd(path_in_repo=rel, path_or_fileobj=src if isinstance(src, bytes) else str(src))
+            for rel, src in sorted(files.items())
+        ]
         ops += [CommitOperationDelete(path_in_repo=rel) for rel in sorted(delete)]
         try:
-            info = self.api.create_commit(self.repo_id, ops, commit_message=message, repo_type=self.repo_type,
-                                          revision="main")
+            info = self.api.create_commit(
+                self.repo_id, ops, commit_message=message, repo_type=self.repo_type, revision="main"
+            )
         except (HfHubHTTPError, OSError) as e:
             raise self._fail("uploading", e) from None
         return info.oid

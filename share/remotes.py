@@ -66,8 +66,10 @@ def json_object(data: str | bytes, where: str) -> dict:
 def parse_remote(text: str) -> Location:
     """Parse a remote address (see the module docstring); malformed ones raise ConfigError."""
     if not isinstance(text, str) or not text.strip():
-        raise ConfigError(f"remote {text!r} is empty; give hf://datasets/OWNER/NAME, hf://OWNER/NAME, "
-                          "s3://bucket/prefix or a folder path")
+        raise ConfigError(
+            f"remote {text!r} is empty; give hf://datasets/OWNER/NAME, hf://OWNER/NAME, "
+            "s3://bucket/prefix or a folder path"
+        )
     text = text.strip()
     base, at, rev = text.rpartition("@")
     if at and rev and "/" not in rev and base:
@@ -79,24 +81,29 @@ def parse_remote(text: str) -> Location:
     if "://" not in text:
         text = "file://" + os.path.abspath(os.path.expanduser(text))
     elif "@" in text.split("://", 1)[1].split("/", 1)[0]:
-        raise ConfigError(f"remote {text.split('://', 1)[0]}://... carries credentials in the URL; put them in "
-                          "fsspec's configuration or the store's usual place (e.g. AWS_PROFILE) instead")
+        raise ConfigError(
+            f"remote {text.split('://', 1)[0]}://... carries credentials in the URL; put them in "
+            "fsspec's configuration or the store's usual place (e.g. AWS_PROFILE) instead"
+        )
     return Location(text.rstrip("/") or text, revision)
 
 
 def _hub(text: str, revision: str | None) -> Location:
-    parts = [p for p in text[len(HUB_SCHEME):].split("/") if p]
+    parts = [p for p in text[len(HUB_SCHEME) :].split("/") if p]
     repo_type = "model"
     if parts and parts[0] in ("datasets", "models", "spaces"):
         kind = parts.pop(0)
         if kind == "spaces":
-            raise ConfigError(f"remote {text!r} is a Space; nsl pushes to dataset and model repositories "
-                              "(hf://datasets/OWNER/NAME or hf://OWNER/NAME)")
+            raise ConfigError(
+                f"remote {text!r} is a Space; nsl pushes to dataset and model repositories "
+                "(hf://datasets/OWNER/NAME or hf://OWNER/NAME)"
+            )
         repo_type = "dataset" if kind == "datasets" else "model"
     if len(parts) != 2 or not all(REPO_PART.match(p) for p in parts):
-        raise ConfigError(f"remote {text!r} is not a Hub repository; write hf://datasets/OWNER/NAME for a "
-                          "dataset or hf://OWNER/NAME for a model")
+        raise ConfigError(
+            f"remote {text!r} is not a Hub repository; write hf://datasets/OWNER/NAME for a "
+            "dataset or hf://OWNER/NAME for a model"
+        )
     repo_id = "/".join(parts)
     url = f"{HUB_SCHEME}{'datasets/' if repo_type == 'dataset' else ''}{repo_id}"
     return Location(url, revision, repo_id, repo_type)
-

@@ -85,8 +85,7 @@ def sha256_file(path: Path) -> str:
 
 def file_table(root: Path, rels: tuple[str, ...] | list[str]) -> dict[str, dict[str, Any]]:
     """``{rel: {"size", "sha256"}}`` of files under ``root``."""
-    return {rel: {"size": (Path(root) / rel).stat().st_size, "sha256": sha256_file(Path(root) / rel)}
-            for rel in rels}
+    return {rel: {"size": (Path(root) / rel).stat().st_size, "sha256": sha256_file(Path(root) / rel)} for rel in rels}
 
 
 def encode(obj: dict[str, Any]) -> bytes:
@@ -95,8 +94,14 @@ def encode(obj: dict[str, Any]) -> bytes:
 
 def checkpoint_manifest(folder: Path, checkpoint: dict[str, Any], lineage: list[dict[str, Any]]) -> dict[str, Any]:
     """The share manifest of a checkpoint folder: file digests, its identity and its published lineage."""
-    return {"format": SHARE_FORMAT, "version": SHARE_VERSION, "kind": "checkpoint",
-            "files": file_table(folder, CHECKPOINT_FILES), "checkpoint": dict(checkpoint), "lineage": lineage}
+    return {
+        "format": SHARE_FORMAT,
+        "version": SHARE_VERSION,
+        "kind": "checkpoint",
+        "files": file_table(folder, CHECKPOINT_FILES),
+        "checkpoint": dict(checkpoint),
+        "lineage": lineage,
+    }
 
 
 def kind_of(manifest: dict[str, Any], where: str) -> str:
@@ -106,8 +111,10 @@ def kind_of(manifest: dict[str, Any], where: str) -> str:
         return "checkpoint"
     if isinstance(manifest.get("files"), dict) and isinstance(manifest.get("hash"), str):
         return "dataset"
-    raise CorruptDataError(f"{where}: {MANIFEST} is neither an nsl dataset manifest nor a checkpoint share "
-                           "manifest; was it pushed with `nsl push`?")
+    raise CorruptDataError(
+        f"{where}: {MANIFEST} is neither an nsl dataset manifest nor a checkpoint share "
+        "manifest; was it pushed with `nsl push`?"
+    )
 
 
 def _check(path: Path, want: dict[str, Any]) -> str | None:
@@ -133,8 +140,10 @@ def push_dataset(root: Path, *, name: str, version: int, dest: str, card: str) -
     """Publish the dataset version folder ``root`` (``name`` at ``version``) to ``dest``."""
     loc = parse_remote(dest)
     if loc.revision:
-        raise ConfigError(f"push destination {dest!r} names a revision; leave out '@{loc.revision}' "
-                          f"(the version tag v{version} comes from the dataset)")
+        raise ConfigError(
+            f"push destination {dest!r} names a revision; leave out '@{loc.revision}' "
+            f"(the version tag v{version} comes from the dataset)"
+        )
     root = Path(root)
     manifest = json.loads((root / MANIFEST).read_text())
     if loc.is_hub and loc.repo_type != "dataset":
@@ -152,8 +161,10 @@ def _push_dataset_hub(remote, root: Path, manifest: dict, name: str, version: in
     if tag in tags:
         published = remote.read_json(MANIFEST, tags[tag]) or {}
         if published.get("hash") != manifest["hash"]:
-            raise ConfigError(f"{remote.url} already has {tag} with other content (hash {published.get('hash')}, "
-                              f"this {name}@v{version} is {manifest['hash']}); push to another repository")
+            raise ConfigError(
+                f"{remote.url} already has {tag} with other content (hash {published.get('hash')}, "
+                f"this {name}@v{version} is {manifest['hash']}); push to another repository"
+            )
         out = PushResult(remote.url, tags[tag], unchanged=sorted(files))
         if LEROBOT_TAG not in tags:
             remote.tag(LEROBOT_TAG, tags[tag])
@@ -164,24 +175,34 @@ def _push_dataset_hub(remote, root: Path, manifest: dict, name: str, version: in
     have = current.get("files") if isinstance(current.get("files"), dict) else {}
     send = {rel: root / rel for rel, f in files.items() if (have.get(rel) or {}).get("sha256") != f["sha256"]}
     delete = sorted(set(have) - set(files))
-    commit = remote.commit({**send, CARD: card.encode(), MANIFEST: (root / MANIFEST).read_bytes()}, delete,
-                           f"nsl: {name} v{version} ({manifest['hash']})")
+    commit = remote.commit(
+        {**send, CARD: card.encode(), MANIFEST: (root / MANIFEST).read_bytes()},
+        delete,
+        f"nsl: {name} v{version} ({manifest['hash']})",
+    )
     remote.tag(tag, commit)
     moved = []
     newest = max((int(m[1]) for t in tags if (m := VERSION_TAG.fullmatch(t))), default=0)
     if version >= newest:  # LeRobot loads the v3.0 tag: keep it on the newest version
         remote.tag(LEROBOT_TAG, commit, move=LEROBOT_TAG in tags)
         moved = [LEROBOT_TAG]
-    return PushResult(remote.url, commit, uploaded=sorted([*send, CARD, MANIFEST]),
-                      unchanged=sorted(set(files) - set(send)), tags=[tag, *moved])
+    return PushResult(
+        remote.url,
+        commit,
+        uploaded=sorted([*send, CARD, MANIFEST]),
+        unchanged=sorted(set(files) - set(send)),
+        tags=[tag, *moved],
+    )
 
 
 def _push_dataset_fs(remote, root: Path, manifest: dict, version: int, card: str) -> PushResult:
     files, vdir = manifest["files"], f"v{version}"
     published = remote.read_json(f"{vdir}/{MANIFEST}")
     if published is not None and published.get("hash") != manifest["hash"]:
-        raise ConfigError(f"{remote.url}/{vdir} already holds another version (hash {published.get('hash')}, "
-                          f"this one is {manifest['hash']}); push to another prefix")
+        raise ConfigError(
+            f"{remote.url}/{vdir} already holds another version (hash {published.get('hash')}, "
+            f"this one is {manifest['hash']}); push to another prefix"
+        )
     present = remote.sizes(vdir) if published is not None else {}
     # With the remote manifest naming the same hash, a file of the right size is that file (each object
     # was complete before the manifest, written last, was); without it nothing on the remote is trusted.
@@ -199,8 +220,9 @@ def _push_dataset_fs(remote, root: Path, manifest: dict, version: int, card: str
     return out
 
 
-def push_checkpoint(folder: Path, *, dest: str, card: str, checkpoint: dict[str, Any],
-                    lineage: list[dict[str, Any]]) -> PushResult:
+def push_checkpoint(
+    folder: Path, *, dest: str, card: str, checkpoint: dict[str, Any], lineage: list[dict[str, Any]]
+) -> PushResult:
     """Publish a checkpoint folder (``model.safetensors`` + ``config.json``) as a model repository."""
     loc = parse_remote(dest)
     if loc.revision:
@@ -217,8 +239,9 @@ def push_checkpoint(folder: Path, *, dest: str, card: str, checkpoint: dict[str,
         head = branches.get("main")
         current = (remote.read_json(MANIFEST, head) if head else None) or {}
         have = current.get("files") if isinstance(current.get("files"), dict) else {}
-        send: dict[str, Path | bytes] = {rel: folder / rel for rel, f in files.items()
-                                         if (have.get(rel) or {}).get("sha256") != f["sha256"]}
+        send: dict[str, Path | bytes] = {
+            rel: folder / rel for rel, f in files.items() if (have.get(rel) or {}).get("sha256") != f["sha256"]
+        }
         manifest["card_sha256"] = hashlib.sha256(card.encode()).hexdigest()
         if current.get("card_sha256") != manifest["card_sha256"]:
             send[CARD] = card.encode()
@@ -226,15 +249,18 @@ def push_checkpoint(folder: Path, *, dest: str, card: str, checkpoint: dict[str,
             send[MANIFEST] = encode(manifest)
         out = PushResult(remote.url, head or "", unchanged=sorted(set(files) - set(send)))
         if send:
-            out.revision = remote.commit(send, [], f"nsl: {checkpoint.get('name')}@{checkpoint.get('step')} "
-                                                   f"({checkpoint.get('id', '')[:12]})")
+            out.revision = remote.commit(
+                send, [], f"nsl: {checkpoint.get('name')}@{checkpoint.get('step')} ({checkpoint.get('id', '')[:12]})"
+            )
             out.uploaded = sorted(send)
         return out
     published = remote.read_json(MANIFEST)
     if published is not None and (published.get("checkpoint") or {}).get("id") != checkpoint.get("id"):
         other = published.get("checkpoint") or {}
-        raise ConfigError(f"{remote.url} already holds checkpoint {other.get('name')}@{other.get('step')} "
-                          f"({str(other.get('id'))[:12]}); push each checkpoint to its own prefix")
+        raise ConfigError(
+            f"{remote.url} already holds checkpoint {other.get('name')}@{other.get('step')} "
+            f"({str(other.get('id'))[:12]}); push each checkpoint to its own prefix"
+        )
     present = remote.sizes() if published is not None else {}
     send_fs = [rel for rel, f in sorted(files.items()) if present.get(rel) != f["size"]]
     out = PushResult(remote.url, str(checkpoint.get("id", "")), unchanged=sorted(set(files) - set(send_fs)))
@@ -290,8 +316,10 @@ def _locate_hub(remote, loc: Location) -> tuple[Pulled, str]:
         elif named:
             version = max(named)
         else:
-            raise UnknownReferenceError(f"{loc.url}@{rev} carries no nsl version tag (v1, v2, ...); "
-                                        f"name one, e.g. {loc.url}@{_newest_tag(tags) or 'v1'}")
+            raise UnknownReferenceError(
+                f"{loc.url}@{rev} carries no nsl version tag (v1, v2, ...); "
+                f"name one, e.g. {loc.url}@{_newest_tag(tags) or 'v1'}"
+            )
     return Pulled(kind, loc, commit, manifest, Path(), version), ""
 
 
@@ -310,17 +338,21 @@ def _locate_fs(remote, loc: Location) -> tuple[Pulled, str]:
             return Pulled(kind, loc, str(top["checkpoint"].get("id", "")), top, Path()), ""
         m = VERSION_TAG.fullmatch(loc.url.rstrip("/").rsplit("/", 1)[-1])
         if not m:
-            raise ConfigError(f"{loc.url} holds a dataset version but its folder is not named vN; "
-                              "push it with `nsl push` to get the layout URL/vN/")
+            raise ConfigError(
+                f"{loc.url} holds a dataset version but its folder is not named vN; "
+                "push it with `nsl push` to get the layout URL/vN/"
+            )
         return Pulled(kind, loc, f"v{m[1]}", top, Path(), int(m[1])), ""
     versions = remote.versions()
     if not versions:
-        raise UnknownReferenceError(f"{loc.url} holds no checkpoint ({MANIFEST}) and no dataset versions (vN/"
-                                    f"{MANIFEST}); check the URL")
+        raise UnknownReferenceError(
+            f"{loc.url} holds no checkpoint ({MANIFEST}) and no dataset versions (vN/{MANIFEST}); check the URL"
+        )
     version = int(loc.revision[1:]) if loc.revision else versions[-1]
     if version not in versions:
-        raise UnknownReferenceError(f"{loc.url} has no version v{version}; it has "
-                                    f"{', '.join(f'v{v}' for v in versions)}")
+        raise UnknownReferenceError(
+            f"{loc.url} has no version v{version}; it has {', '.join(f'v{v}' for v in versions)}"
+        )
     manifest = remote.read_json(f"v{version}/{MANIFEST}")
     if manifest is None or kind_of(manifest, f"{loc.url}/v{version}") != "dataset":
         raise CorruptDataError(f"{loc.url}/v{version}/{MANIFEST} is not a dataset manifest; push it again")
@@ -357,12 +389,16 @@ def _download(remote, pulled: Pulled, base: str) -> None:
             try:
                 _fetch(remote, pulled, base + rel, tmp)
             except FileNotFoundError:
-                raise CorruptDataError(f"{where}: file {rel} is in the published {MANIFEST} but missing on the "
-                                       "remote; the push was incomplete, push it again") from None
+                raise CorruptDataError(
+                    f"{where}: file {rel} is in the published {MANIFEST} but missing on the "
+                    "remote; the push was incomplete, push it again"
+                ) from None
             problem = _check(tmp, want)
             if problem is not None:
-                raise CorruptDataError(f"{where}: file {rel} does not match the published {MANIFEST} ({problem}); "
-                                       "the remote copy was altered or is incomplete, nothing was registered")
+                raise CorruptDataError(
+                    f"{where}: file {rel} does not match the published {MANIFEST} ({problem}); "
+                    "the remote copy was altered or is incomplete, nothing was registered"
+                )
             os.replace(tmp, dest)
         finally:
             if tmp.exists():

@@ -18,11 +18,38 @@ from .plan import SHIPPED, Plan, load_plan
 from .proxy import suggest_base
 from .scheduler import run_graph
 from .transfer import SHIPPED_TRANSFER, TransferPlan, load_transfer_plan
-from .transfer_run import (estimate_transfer, run_curricula, run_transfer, transfer_dir, transfer_status,
-                           write_transfer_report)
+from .transfer_run import (
+    estimate_transfer,
+    run_curricula,
+    run_transfer,
+    transfer_dir,
+    transfer_status,
+    write_transfer_report,
+)
 from .units import Unit, build_units, unit_graph
 
-__all__ = ["SHIPPED", "SHIPPED_TRANSFER", "estimate_study", "estimate_transfer", "Plan", "TransferPlan", "Unit",
-           "build_units", "load_plan", "load_transfer_plan", "run_curricula", "run_graph", "run_study", "run_transfer",
-           "status_lines", "study_dir", "study_status", "suggest_base", "transfer_dir", "transfer_status",
-           "unit_graph", "write_study_report", "write_transfer_report"]
+__all__ = [
+    "SHIPPED",
+    "SHIPPED_TRANSFER",
+    "estimate_study",
+    "estimate_transfer",
+    "Plan",
+    "TransferPlan",
+    "Unit",
+    "build_units",
+    "load_plan",
+    "load_transfer_plan",
+    "run_curricula",
+    "run_graph",
+    "run_study",
+    "run_transfer",
+    "status_lines",
+    "study_dir",
+    "study_status",
+    "suggest_base",
+    "transfer_dir",
+    "transfer_status",
+    "unit_graph",
+    "write_study_report",
+    "write_transfer_report",
+]

@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import Any
 
 from nsl.errors import ConfigError, CorruptDataError, UnknownReferenceError
-
 from nsl.services.refs import resolve_init
 
 from .plan import Plan
@@ -27,6 +26,7 @@ EPISODES_PER_FILE = 100  # nsl collect's default: part of a dataset's content, s
 
 
 # --- references ----------------------------------------------------------------------------------------------------
+
 
 def resolve_checkpoint(ref: str):
     """A catalogued checkpoint (the shipped base registers itself on first use)."""
@@ -68,30 +68,37 @@ def base_sources(plan: Plan) -> list[BaseSource]:
         config = json.loads((Path(entry.path) / "config.json").read_text())
         sources = (config.get("data") or {}).get("sources") or []
         if not sources:
-            raise ConfigError(f"base checkpoint {plan.base} records no training data; set base_data.source = 'plan' "
-                              "and list the base datasets in the plan")
+            raise ConfigError(
+                f"base checkpoint {plan.base} records no training data; set base_data.source = 'plan' "
+                "and list the base datasets in the plan"
+            )
         total = sum(float(s["weight"]) for s in sources)
         for s in sources:
             name = api.parse_ref(s["ref"]).name
             want = s["version_hash"] if plan.base_data.verify else None  # verify = false: any version will do
-            present = [r for r in _versions_with_hash(name, want)
-                       if api.open_version(r).num_episodes >= int(s["episodes"])]
+            present = [
+                r for r in _versions_with_hash(name, want) if api.open_version(r).num_episodes >= int(s["episodes"])
+            ]
             recipe = _recipe(recipes[name]) if name in recipes else None  # a unit, done when the data is there
             if not present:
                 if name not in recipes:
                     raise UnknownReferenceError(
-                        f"base data {s['ref']} ({s['version_hash'][:19]}...) of {plan.base} is not in $NSL_HOME and the "
-                        "plan has no "
+                        f"base data {s['ref']} ({s['version_hash'][:19]}...) of {plan.base} is not in $NSL_HOME "
+                        "and the plan has no "
                         f"recipe to collect it; add a [[base_data.datasets]] entry named {name!r} "
-                        "(scripts/collect_base_data.sh has the commands) or copy the dataset into the workspace")
+                        "(scripts/collect_base_data.sh has the commands) or copy the dataset into the workspace"
+                    )
                 if want is not None and _versions_with_hash(name, None):
                     raise CorruptDataError(
                         f"the workspace holds dataset {name!r} but no version with the hash {plan.base} was trained "
-                        f"on ({want[:19]}...); remove it, use another NSL_HOME, or set base_data.verify = false")
+                        f"on ({want[:19]}...); remove it, use another NSL_HOME, or set base_data.verify = false"
+                    )
                 r = recipes[name]
                 if r.episodes != int(s["episodes"]):
-                    raise ConfigError(f"plan base_data.datasets {name!r} has episodes = {r.episodes}, but {plan.base} "
-                                      f"was trained on {s['episodes']}; the recipe must match the recorded data")
+                    raise ConfigError(
+                        f"plan base_data.datasets {name!r} has episodes = {r.episodes}, but {plan.base} "
+                        f"was trained on {s['episodes']}; the recipe must match the recorded data"
+                    )
                 recipe = _recipe(r)
             out.append(BaseSource(name, float(s["weight"]) / total, want, int(s["episodes"]), recipe))
         return out
@@ -105,7 +112,8 @@ def base_sources(plan: Plan) -> list[BaseSource]:
         elif want is not None and _versions_with_hash(d.name, None):
             raise CorruptDataError(
                 f"the workspace holds dataset {d.name!r} but no version with the hash {plan.base} records for it "
-                f"({want[:19]}...); remove it, use another NSL_HOME, or set base_data.verify = false")
+                f"({want[:19]}...); remove it, use another NSL_HOME, or set base_data.verify = false"
+            )
         out.append(BaseSource(d.name, d.weight / total, want, d.episodes, _recipe(d)))
     return out
 
@@ -116,13 +124,21 @@ def _recorded_data(ref: str) -> dict[tuple[str, int], str]:
 
     config = json.loads((Path(resolve_checkpoint(ref).path) / "config.json").read_text())
     sources = (config.get("data") or {}).get("sources") or []
-    return {(api.parse_ref(s["ref"]).name, int(s["episodes"])): s["version_hash"] for s in sources
-            if s.get("version_hash")}
+    return {
+        (api.parse_ref(s["ref"]).name, int(s["episodes"])): s["version_hash"] for s in sources if s.get("version_hash")
+    }
 
 
 def _recipe(d) -> dict[str, Any]:
-    return {"shift": d.shift, "policy": d.policy, "policy_ref": d.policy, "episodes": d.episodes, "seed": d.seed,
-            "epsilon": 0.0, "batch": 8}
+    return {
+        "shift": d.shift,
+        "policy": d.policy,
+        "policy_ref": d.policy,
+        "episodes": d.episodes,
+        "seed": d.seed,
+        "epsilon": 0.0,
+        "batch": 8,
+    }
 
 
 def _check_provenance(ref: str, recipe: Mapping[str, Any]) -> None:
@@ -132,11 +148,14 @@ def _check_provenance(ref: str, recipe: Mapping[str, Any]) -> None:
     got = (spec.get("env", {}).get("shift"), spec.get("policy_ref"), spec.get("seed"))
     want = (recipe["shift"], recipe["policy_ref"], recipe["seed"])
     if got != want:
-        raise ConfigError(f"dataset {ref} was collected as (shift, policy, seed) = {got}, but the plan's recipe says "
-                          f"{want}; rename one of them")
+        raise ConfigError(
+            f"dataset {ref} was collected as (shift, policy, seed) = {got}, but the plan's recipe says "
+            f"{want}; rename one of them"
+        )
 
 
 # --- done? ----------------------------------------------------------------------------------------------------------
+
 
 def is_done(unit: Unit) -> bool:
     """True when the unit's output (dataset version, checkpoint, evaluation) exists and is complete."""
@@ -180,6 +199,7 @@ def evaluation(ref: str, shift: str, episodes: int, seed: int):
 
 # --- run ------------------------------------------------------------------------------------------------------------
 
+
 def run_unit(unit: Unit, workers: int = 1, progress: bool = True) -> dict[str, Any]:
     """Do the unit's job; ``workers`` simulator processes inside it.  Returns a small summary."""
     started = time.perf_counter()
@@ -199,16 +219,32 @@ def _collect(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
     from nsl.services.collect import CollectConfig, collect
 
     p = unit.params
-    version = collect(CollectConfig(shift=p["shift"], episodes=p["episodes"], policy=p["policy_ref"],
-                                    data=p["dataset"], workers=workers, seed=p["seed"], batch_size=p["batch"],
-                                    image_size=IMAGE_SIZE, episodes_per_file=EPISODES_PER_FILE,
-                                    epsilon=p["epsilon"]), progress=progress)
+    version = collect(
+        CollectConfig(
+            shift=p["shift"],
+            episodes=p["episodes"],
+            policy=p["policy_ref"],
+            data=p["dataset"],
+            workers=workers,
+            seed=p["seed"],
+            batch_size=p["batch"],
+            image_size=IMAGE_SIZE,
+            episodes_per_file=EPISODES_PER_FILE,
+            epsilon=p["epsilon"],
+        ),
+        progress=progress,
+    )
     if p.get("expect_hash") and version.hash != p["expect_hash"]:
         raise CorruptDataError(
             f"dataset {version.ref} collected again has hash {version.hash[:19]}..., but the base checkpoint records "
-            f"{p['expect_hash'][:19]}...; the simulator or recipe changed since the base was trained")
-    return {"dataset": version.ref, "hash": version.hash, "episodes": version.num_episodes,
-            "success_rate": float(version.episodes.success.mean())}
+            f"{p['expect_hash'][:19]}...; the simulator or recipe changed since the base was trained"
+        )
+    return {
+        "dataset": version.ref,
+        "hash": version.hash,
+        "episodes": version.num_episodes,
+        "success_rate": float(version.episodes.success.mean()),
+    }
 
 
 def _data_mix(p: Mapping[str, Any]) -> list[tuple[str, float]]:
@@ -216,8 +252,10 @@ def _data_mix(p: Mapping[str, Any]) -> list[tuple[str, float]]:
     for b in p["base"]:
         refs = _versions_with_hash(b["dataset"], b["hash"])
         if not refs:
-            raise UnknownReferenceError(f"base dataset {b['dataset']} ({b['hash'] or 'any version'}) is missing; "
-                                        "run the study again to collect it")
+            raise UnknownReferenceError(
+                f"base dataset {b['dataset']} ({b['hash'] or 'any version'}) is missing; "
+                "run the study again to collect it"
+            )
         mix.append((refs[-1] if b["hash"] else f"{refs[-1]}:{b['episodes']}", float(b["weight"])))
     t = p["target"]
     mix.append((f"{t['dataset']}:{t['tier']}", float(t["weight"])))
@@ -231,13 +269,31 @@ def _train(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
     p = unit.params
     m = p.get("monitor") or {}
     options = TrainOptions(
-        data=tuple(f"{ref}={weight!r}" for ref, weight in _data_mix(p)), name=p["checkpoint"], init=p["init_ref"],
-        method=p["method"], steps=p["steps"], lr=p.get("lr"), seed=p["seed"], checkpoint_every=p["checkpoint_every"],
-        target_shift=p["shift"], eval_every=m.get("every", 0), eval_episodes=m.get("episodes", 0),
-        base_episodes=m.get("base_episodes", 0), eval_scenes=m.get("seed", 0), workers=workers,
-        **({"holdout": m["holdout"]} if m.get("holdout") else {}))
-    result = train(options, progress=progress, record={"argv": ["nsl", "study", "unit", unit.name], "unit": dict(p)},
-                   offline=bool(m.get("holdout")), stop=False, source="study curve", quiet=True)
+        data=tuple(f"{ref}={weight!r}" for ref, weight in _data_mix(p)),
+        name=p["checkpoint"],
+        init=p["init_ref"],
+        method=p["method"],
+        steps=p["steps"],
+        lr=p.get("lr"),
+        seed=p["seed"],
+        checkpoint_every=p["checkpoint_every"],
+        target_shift=p["shift"],
+        eval_every=m.get("every", 0),
+        eval_episodes=m.get("episodes", 0),
+        base_episodes=m.get("base_episodes", 0),
+        eval_scenes=m.get("seed", 0),
+        workers=workers,
+        **({"holdout": m["holdout"]} if m.get("holdout") else {}),
+    )
+    result = train(
+        options,
+        progress=progress,
+        record={"argv": ["nsl", "study", "unit", unit.name], "unit": dict(p)},
+        offline=bool(m.get("holdout")),
+        stop=False,
+        source="study curve",
+        quiet=True,
+    )
     return {"checkpoint": result.checkpoint, "id": result.id}
 
 
@@ -246,8 +302,11 @@ def _evaluate(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
     from nsl.services.evaluate import EvaluateOptions, evaluate
 
     p = unit.params
-    result = evaluate([p["checkpoint_ref"]], EvaluateOptions(shift=p["shift"], episodes=p["episodes"], seed=p["seed"],
-                                                             workers=workers, batch_size=8),
-                      progress=progress, source="study")
+    result = evaluate(
+        [p["checkpoint_ref"]],
+        EvaluateOptions(shift=p["shift"], episodes=p["episodes"], seed=p["seed"], workers=workers, batch_size=8),
+        progress=progress,
+        source="study",
+    )
     (r,) = result.table[p["checkpoint_ref"]].values()
     return {"successes": r.successes, "episodes": r.episodes}

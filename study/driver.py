@@ -21,7 +21,7 @@ from nsl.errors import ConfigError, UnknownReferenceError
 
 from . import actions
 from .plan import Plan, load_plan, parse_plan
-from .report import (RECORDS_FILE, REPORT_FILE, gather, plot_curves, plot_early_stop, plot_tiers, render)
+from .report import RECORDS_FILE, REPORT_FILE, gather, plot_curves, plot_early_stop, plot_tiers, render
 from .scheduler import STATUS_FILE, live_status, pid_alive, read_status, run_graph
 from .units import build_units, order, unit_graph
 
@@ -41,8 +41,10 @@ def prepare(plan_ref: str, name: str | None = None):
         raise ConfigError(f"--name {name!r} must use letters, digits, '-' and '_'")
     saved = study_dir(name) / PLAN_FILE
     if saved.is_file() and json.loads(saved.read_text()) != json.loads(json.dumps(plan.to_dict())):
-        raise ConfigError(f"study {name!r} exists with a different plan ({saved}); run it with the same plan to "
-                          "resume, or choose another --name")
+        raise ConfigError(
+            f"study {name!r} exists with a different plan ({saved}); run it with the same plan to "
+            "resume, or choose another --name"
+        )
     base = actions.base_sources(plan)
     units = build_units(plan, name, base)
     return plan, name, units, unit_graph(units)
@@ -67,30 +69,48 @@ def run_study(plan_ref: str, name: str | None = None, workers: int = 1, progress
     return status
 
 
-def run_planned(folder: Path, key: str, name: str, plan, units: dict, graph, *, workers: int,
-                progress: bool) -> dict[str, Any]:
+def run_planned(
+    folder: Path, key: str, name: str, plan, units: dict, graph, *, workers: int, progress: bool
+) -> dict[str, Any]:
     """Run a planned unit graph in ``folder`` (a study's or a transfer's, ``key`` says which): refuse while
     another live process runs it, save the plan and the unit list, then run (or resume) the graph."""
     running = read_status(folder / STATUS_FILE)
     if running.get("state") == "running" and running.get("pid") != os.getpid() and pid_alive(running.get("pid")):
-        raise ConfigError(f"{key} {name!r} is being run by process {running['pid']}; wait for it, or stop it and "
-                          "run the same command again to resume")
+        raise ConfigError(
+            f"{key} {name!r} is being run by process {running['pid']}; wait for it, or stop it and "
+            "run the same command again to resume"
+        )
     folder.mkdir(parents=True, exist_ok=True)
     workspace.atomic_write_json(folder / PLAN_FILE, plan.to_dict())
-    workspace.atomic_write_json(folder / UNITS_FILE, {
-        "units": [{"name": n, "kind": units[n].kind, "deps": list(units[n].deps), "params": dict(units[n].params)}
-                  for n in order(graph)], "code_version": code_version()})
-    return run_graph(graph, folder / STATUS_FILE, execute=actions.run_unit, is_done=actions.is_done,
-                     workers=workers, progress=progress,
-                     meta={key: name, "plan": plan.source, "workers": workers, "code_version": code_version()})
+    workspace.atomic_write_json(
+        folder / UNITS_FILE,
+        {
+            "units": [
+                {"name": n, "kind": units[n].kind, "deps": list(units[n].deps), "params": dict(units[n].params)}
+                for n in order(graph)
+            ],
+            "code_version": code_version(),
+        },
+    )
+    return run_graph(
+        graph,
+        folder / STATUS_FILE,
+        execute=actions.run_unit,
+        is_done=actions.is_done,
+        workers=workers,
+        progress=progress,
+        meta={key: name, "plan": plan.source, "workers": workers, "code_version": code_version()},
+    )
 
 
 def _load(name: str) -> Plan:
     path = study_dir(name) / PLAN_FILE
     if not path.is_file():
         known = sorted(p.name for p in (workspace.home() / "studies").glob("*") if (p / PLAN_FILE).is_file())
-        raise UnknownReferenceError(f"no study named {name!r} in {workspace.home()}; "
-                                    + (f"known: {', '.join(known)}" if known else "start one with `nsl study run small`"))
+        raise UnknownReferenceError(
+            f"no study named {name!r} in {workspace.home()}; "
+            + (f"known: {', '.join(known)}" if known else "start one with `nsl study run small`")
+        )
     return parse_plan(json.loads(path.read_text()), source=str(path), default_name=name)
 
 
@@ -107,10 +127,15 @@ def status_lines(status: dict[str, Any], kind: str = "study") -> list[str]:
     for n, u in units.items():
         by.setdefault(u["state"], []).append(n)
     spent = sum(u.get("seconds") or 0 for u in units.values())
-    lines = [f"{kind} {status.get(kind)}: {status.get('state')}; "
-             + ", ".join(f"{len(by.get(s, []))} {s}" for s in ("done", "running", "interrupted", "failed", "left")
-                         if by.get(s) or s in ("done", "left"))
-             + f"; {spent / 60:.1f} minutes spent in units"]
+    lines = [
+        f"{kind} {status.get(kind)}: {status.get('state')}; "
+        + ", ".join(
+            f"{len(by.get(s, []))} {s}"
+            for s in ("done", "running", "interrupted", "failed", "left")
+            if by.get(s) or s in ("done", "left")
+        )
+        + f"; {spent / 60:.1f} minutes spent in units"
+    ]
     for state in ("running", "interrupted", "failed", "left", "done"):
         for n in by.get(state, []):
             u = units[n]
@@ -134,8 +159,9 @@ def _fine_tune_recipe(plan: Plan, name: str) -> dict[str, Any] | None:
     from .units import train_tag
 
     f = plan.finetune
-    entry = actions._checkpoint_at(f"{name}-{train_tag('ft', plan.shifts[0], f.tiers[-1], f.steps, f.seeds[0])}",
-                                   f.steps)
+    entry = actions._checkpoint_at(
+        f"{name}-{train_tag('ft', plan.shifts[0], f.tiers[-1], f.steps, f.seeds[0])}", f.steps
+    )
     if entry is None:
         return None
     training = read_config(Path(entry.path))["training"]

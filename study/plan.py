@@ -43,12 +43,16 @@ class BaseDataset:
     seed: int  # collection seed (episode i is a pure function of (seed, i))
     episodes: int  # episodes the dataset holds
     shift: str = "base"
-    weight: float = 1.0  # share within the base half of each batch (source "plan"; "checkpoint" uses the recorded weights)
+    weight: float = (
+        1.0  # share within the base half of each batch (source "plan"; "checkpoint" uses the recorded weights)
+    )
 
 
 @dataclass(frozen=True)
 class BaseData:
-    source: str = "checkpoint"  # "checkpoint": the base checkpoint's own pre-training data, hash-checked; "plan": datasets below
+    source: str = (
+        "checkpoint"  # "checkpoint": the base checkpoint's own pre-training data, hash-checked; "plan": datasets below
+    )
     datasets: tuple[BaseDataset, ...] = ()  # recipes (source "checkpoint": to collect a missing recorded dataset again)
     verify: bool = True  # the data must have the hashes the base checkpoint records for it (source "plan": the
     # datasets whose name and size the checkpoint records, e.g. the scripted data it was pre-trained on)
@@ -78,8 +82,13 @@ class Finetune:
 
 @dataclass(frozen=True)
 class Continual:
-    sequence: tuple[str, ...] = ("harsh_lighting", "transparent_objects", "checkerboard_backing", "extend_gripper",
-                                 "offset_gripper")
+    sequence: tuple[str, ...] = (
+        "harsh_lighting",
+        "transparent_objects",
+        "checkerboard_backing",
+        "extend_gripper",
+        "offset_gripper",
+    )
     episodes: int = 800  # episodes each stage's policy collects in its shift
     steps: int = 2000  # gradient steps per stage (the fine-tuning recipe's)
     seed: int = 0  # training seed
@@ -113,8 +122,13 @@ class EarlyStop:
 class Plan:
     name: str  # default study name (folder $NSL_HOME/studies/NAME)
     base: str = "ckpt:base"  # the base checkpoint
-    shifts: tuple[str, ...] = ("harsh_lighting", "transparent_objects", "checkerboard_backing", "extend_gripper",
-                               "offset_gripper")  # the challenge shifts (Tables 5.1 and 5.2)
+    shifts: tuple[str, ...] = (
+        "harsh_lighting",
+        "transparent_objects",
+        "checkerboard_backing",
+        "extend_gripper",
+        "offset_gripper",
+    )  # the challenge shifts (Tables 5.1 and 5.2)
     checkpoint_every: int = 500  # a killed training resumes from its last checkpoint
     base_data: BaseData = field(default_factory=BaseData)
     collect: Collect = field(default_factory=Collect)
@@ -131,8 +145,15 @@ class Plan:
         return d
 
 
-SECTIONS = {"base_data": BaseData, "collect": Collect, "eval": Eval, "finetune": Finetune, "continual": Continual,
-            "curves": Curves, "early_stop": EarlyStop}
+SECTIONS = {
+    "base_data": BaseData,
+    "collect": Collect,
+    "eval": Eval,
+    "finetune": Finetune,
+    "continual": Continual,
+    "curves": Curves,
+    "early_stop": EarlyStop,
+}
 
 
 def _build(cls: type, d: Any, where: str):
@@ -175,8 +196,9 @@ def parse_plan(data: dict[str, Any], source: str = "", default_name: str = "stud
     return plan
 
 
-def read_plan_toml(ref: str, shipped: tuple[str, ...] | list[str], what: str = "plan",
-                   prefix: str = "") -> tuple[dict[str, Any], str, str]:
+def read_plan_toml(
+    ref: str, shipped: tuple[str, ...] | list[str], what: str = "plan", prefix: str = ""
+) -> tuple[dict[str, Any], str, str]:
     """(parsed TOML, source, default name) of a shipped plan ``plans/PREFIX+REF.toml`` or a TOML file path."""
     path = Path(ref)
     if ref in shipped and not path.is_file():
@@ -185,8 +207,10 @@ def read_plan_toml(ref: str, shipped: tuple[str, ...] | list[str], what: str = "
     elif path.is_file():
         text, source, default_name = path.read_text(), str(path), path.stem
     else:
-        raise UnknownReferenceError(f"{what} {ref!r} is neither a file nor a shipped plan; use one of "
-                                    f"{', '.join(shipped)} or a path to a TOML plan")
+        raise UnknownReferenceError(
+            f"{what} {ref!r} is neither a file nor a shipped plan; use one of "
+            f"{', '.join(shipped)} or a path to a TOML plan"
+        )
     try:
         return tomllib.loads(text), source, default_name
     except tomllib.TOMLDecodeError as e:
@@ -211,6 +235,7 @@ def plan_header(ref: str) -> str:
 
 
 # --- validation -------------------------------------------------------------------------------------------------------
+
 
 def _positive(value: Any, what: str) -> None:
     if not isinstance(value, int) or isinstance(value, bool) or value < 1:
@@ -274,8 +299,10 @@ def validate(plan: Plan) -> None:
         if not d.weight > 0:
             raise ConfigError(f"plan base_data.datasets {d.name!r} weight = {d.weight!r} must be positive")
         if d.policy.startswith("ckpt:"):
-            raise ConfigError(f"plan base_data.datasets {d.name!r}: policy {d.policy!r} must be scripted "
-                              "(random or oracle[:NOISE]); base data does not depend on a checkpoint")
+            raise ConfigError(
+                f"plan base_data.datasets {d.name!r}: policy {d.policy!r} must be scripted "
+                "(random or oracle[:NOISE]); base data does not depend on a checkpoint"
+            )
     if len({d.name for d in bd.datasets}) != len(bd.datasets):
         raise ConfigError("plan [[base_data.datasets]] repeat a dataset name")
     c = plan.collect
@@ -290,8 +317,10 @@ def validate(plan: Plan) -> None:
     for k in f.tiers:
         _positive(k, "finetune.tiers")
     if f.tiers[-1] > c.episodes:
-        raise ConfigError(f"plan finetune.tiers has tier {f.tiers[-1]} above the collection size collect.episodes = "
-                          f"{c.episodes}; raise collect.episodes or drop the tier")
+        raise ConfigError(
+            f"plan finetune.tiers has tier {f.tiers[-1]} above the collection size collect.episodes = "
+            f"{c.episodes}; raise collect.episodes or drop the tier"
+        )
     _positive(f.steps, "finetune.steps")
     _seeds(f.seeds, "finetune.seeds")
     for m in f.baselines:
@@ -304,8 +333,10 @@ def validate(plan: Plan) -> None:
         _positive(s.episodes, "continual.episodes")
         _positive(s.steps, "continual.steps")
         if s.episodes > c.episodes:
-            raise ConfigError(f"plan continual.episodes = {s.episodes} is above the collection size collect.episodes "
-                              f"= {c.episodes} (its first stage uses the base policy's collection)")
+            raise ConfigError(
+                f"plan continual.episodes = {s.episodes} is above the collection size collect.episodes "
+                f"= {c.episodes} (its first stage uses the base policy's collection)"
+            )
     if plan.curves is not None:
         cv = plan.curves
         _shift(cv.shift, "curves.shift")
@@ -316,8 +347,9 @@ def validate(plan: Plan) -> None:
         for k in ("episodes", "steps", "every", "eval_episodes"):
             _positive(getattr(cv, k), f"curves.{k}")
         if cv.episodes > c.episodes:
-            raise ConfigError(f"plan curves.episodes = {cv.episodes} is above the collection size collect.episodes "
-                              f"= {c.episodes}")
+            raise ConfigError(
+                f"plan curves.episodes = {cv.episodes} is above the collection size collect.episodes = {c.episodes}"
+            )
         _seeds(cv.seeds, "curves.seeds")
     if plan.early_stop is not None:
         es = plan.early_stop
@@ -325,11 +357,14 @@ def validate(plan: Plan) -> None:
         for k in ("episodes", "steps", "every", "eval_episodes", "patience"):
             _positive(getattr(es, k), f"early_stop.{k}")
         if es.episodes > c.episodes:
-            raise ConfigError(f"plan early_stop.episodes = {es.episodes} is above the collection size "
-                              f"collect.episodes = {c.episodes}")
+            raise ConfigError(
+                f"plan early_stop.episodes = {es.episodes} is above the collection size collect.episodes = {c.episodes}"
+            )
         for crit in es.criteria:
             if crit not in CRITERIA:
                 raise unknown("stopping criterion", crit, CRITERIA, "(plan early_stop.criteria)")
         if not 0.0 < es.holdout < 1.0 or round(es.holdout * es.episodes) < 2:
-            raise ConfigError(f"plan early_stop.holdout = {es.holdout!r} must be in (0, 1) and hold out at least 2 "
-                              f"of the {es.episodes} episodes")
+            raise ConfigError(
+                f"plan early_stop.holdout = {es.holdout!r} must be in (0, 1) and hold out at least 2 "
+                f"of the {es.episodes} episodes"
+            )

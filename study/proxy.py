@@ -81,8 +81,16 @@ def _candidates(cat, refs: Sequence[str]):
     return list(out.values())
 
 
-def suggest_base(shift: str, data: str, *, episodes: int = 100, matrix=None, checkpoints: Sequence[str] = (),
-                 proxy: str = "auc", progress: bool = False):
+def suggest_base(
+    shift: str,
+    data: str,
+    *,
+    episodes: int = 100,
+    matrix=None,
+    checkpoints: Sequence[str] = (),
+    proxy: str = "auc",
+    progress: bool = False,
+):
     """Candidates ranked for learning ``shift`` from ``data``: measured advantage first, then ``proxy``."""
     from nsl.catalog import Catalog
     from nsl.collectors import parse_shift

@@ -24,29 +24,60 @@ CHALLENGE = {
 # Table 5.2: fine-tuning success by number of target attempts (percent).
 TIERS = (25, 50, 100, 200, 400, 800)
 FINETUNE = {
-    "checkerboard_backing": {"base": 50, 25: 67, 50: 48, 100: 71, 200: 47, 400: 89, 800: 90, "scratch": 0,
-                             "imagenet": 0},
+    "checkerboard_backing": {
+        "base": 50,
+        25: 67,
+        50: 48,
+        100: 71,
+        200: 47,
+        400: 89,
+        800: 90,
+        "scratch": 0,
+        "imagenet": 0,
+    },
     "harsh_lighting": {"base": 32, 25: 23, 50: 16, 100: 52, 200: 44, 400: 58, 800: 63, "scratch": 4, "imagenet": 2},
     "extend_gripper": {"base": 75, 25: 93, 50: 67, 100: 80, 200: 51, 400: 90, 800: 69, "scratch": 0, "imagenet": 14},
-    "offset_gripper": {"base": 43, 25: 73, 50: 50, 100: 60, 200: 56, 400: 91, 800: 98, "scratch": 37,
-                       "imagenet": 47},
-    "transparent_objects": {"base": 49, 25: 46, 50: 43, 100: 65, 200: 65, 400: 58, 800: 66, "scratch": 27,
-                            "imagenet": 20},
+    "offset_gripper": {"base": 43, 25: 73, 50: 50, 100: 60, 200: 56, 400: 91, 800: 98, "scratch": 37, "imagenet": 47},
+    "transparent_objects": {
+        "base": 49,
+        25: 46,
+        50: 43,
+        100: 65,
+        200: 65,
+        400: 58,
+        800: 66,
+        "scratch": 27,
+        "imagenet": 20,
+    },
     "base": {"base": 86, 25: 98, 50: 81, 100: 84, 200: 78, 400: 93, 800: 89, "scratch": 0, "imagenet": 12},
 }
 
 # Table 5.3: the continual sequence; final-stage success per task and its change against single-step
 # fine-tuning from the base policy (points).  No forgetting of the base task was found.
 SEQUENCE = ("harsh_lighting", "transparent_objects", "checkerboard_backing", "extend_gripper", "offset_gripper")
-CONTINUAL = {"harsh_lighting": 63, "transparent_objects": 74, "checkerboard_backing": 86, "extend_gripper": 88,
-             "offset_gripper": 91}
-CONTINUAL_VS_SINGLE = {"harsh_lighting": 0, "transparent_objects": 8, "checkerboard_backing": -4,
-                       "extend_gripper": -5, "offset_gripper": -7}
+CONTINUAL = {
+    "harsh_lighting": 63,
+    "transparent_objects": 74,
+    "checkerboard_backing": 86,
+    "extend_gripper": 88,
+    "offset_gripper": 91,
+}
+CONTINUAL_VS_SINGLE = {
+    "harsh_lighting": 0,
+    "transparent_objects": 8,
+    "checkerboard_backing": -4,
+    "extend_gripper": -5,
+    "offset_gripper": -7,
+}
 
 # Figs. 5.4/5.9 (simulation, transparent objects, 75 target attempts): FT reaches base performance in about
 # 200,000 steps; PNN never exceeds 10%; FT+PNN reaches about 50%.
-CURVES = {"ft": "reaches the base policy's success (about 200k steps)", "pnn": "never above 10%",
-          "ft_pnn": "about 50%", "scratch": "needs 3,500 new attempts"}
+CURVES = {
+    "ft": "reaches the base policy's success (about 200k steps)",
+    "pnn": "never above 10%",
+    "ft_pnn": "about 50%",
+    "scratch": "needs 3,500 new attempts",
+}
 
 # Fig. 5.7 (offset gripper, 400 attempts): success rises until about 500k steps, then collapses below the
 # base policy; the study found no stopping criterion.

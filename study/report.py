@@ -32,6 +32,7 @@ OFFLINE_CRITERIA = ("softopc", "auc", "td")
 
 # --- counts ---------------------------------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class Count:
     successes: int
@@ -69,8 +70,11 @@ def diff_interval(a: Count, b: Count) -> tuple[float, float, float]:
     """(a - b, low, high): Newcombe's hybrid score interval (method 10) for a difference of proportions."""
     (l1, u1), (l2, u2) = a.ci, b.ci
     d = a.rate - b.rate
-    return d, d - math.sqrt((a.rate - l1) ** 2 + (u2 - b.rate) ** 2), d + math.sqrt((u1 - a.rate) ** 2 +
-                                                                                  (b.rate - l2) ** 2)
+    return (
+        d,
+        d - math.sqrt((a.rate - l1) ** 2 + (u2 - b.rate) ** 2),
+        d + math.sqrt((u1 - a.rate) ** 2 + (b.rate - l2) ** 2),
+    )
 
 
 def points(a: Count, b: Count) -> str:
@@ -84,6 +88,7 @@ def _pretty(shift: str) -> str:
 
 # --- gathering the records ------------------------------------------------------------------------------------------
 
+
 def gather(plan: Plan, study: str, evaluation, read_curve_file) -> dict[str, Any]:
     """The study's raw numbers from its outputs: ``evaluation(ref, shift, episodes, seed)`` -> catalog entry or
     None; ``read_curve_file(checkpoint_name)`` -> list of CurveRow or None."""
@@ -96,8 +101,11 @@ def gather(plan: Plan, study: str, evaluation, read_curve_file) -> dict[str, Any
 
     out: dict[str, Any] = {"study": study, "plan": plan.to_dict()}
     shifts = list(plan.shifts)
-    extra = [*(plan.continual.sequence if plan.continual else ()), *([plan.curves.shift] if plan.curves else ()),
-             *([plan.early_stop.shift] if plan.early_stop else ())]
+    extra = [
+        *(plan.continual.sequence if plan.continual else ()),
+        *([plan.curves.shift] if plan.curves else ()),
+        *([plan.early_stop.shift] if plan.early_stop else ()),
+    ]
     out["base_policy"] = {s: ev(BASE_POLICY, s) for s in dict.fromkeys(["base", *shifts, *extra])}
     f = plan.finetune
     top = f.tiers[-1]
@@ -121,20 +129,23 @@ def gather(plan: Plan, study: str, evaluation, read_curve_file) -> dict[str, Any
         for tag in continual_tags(plan):
             stages.append([ev(tag, t) for t in tasks])
         single = {s: ev(train_tag("ft", s, c.episodes, c.steps, c.seed), s) for s in c.sequence}
-        out["continual"] = {"tasks": tasks, "stages": ["base policy", *c.sequence], "cells": stages,
-                            "single": single}
+        out["continual"] = {"tasks": tasks, "stages": ["base policy", *c.sequence], "cells": stages, "single": single}
     if plan.curves is not None:
         cv = plan.curves
         curves = {}
         for m in cv.methods:
-            curves[m] = {str(s): _rows(read_curve_file(
-                f"{study}-{train_tag(m, cv.shift, cv.episodes, cv.steps, s, prefix=f'curve-{m}')}"))
-                for s in cv.seeds}
+            curves[m] = {
+                str(s): _rows(
+                    read_curve_file(f"{study}-{train_tag(m, cv.shift, cv.episodes, cv.steps, s, prefix=f'curve-{m}')}")
+                )
+                for s in cv.seeds
+            }
         out["curves"] = curves
     if plan.early_stop is not None:
         es = plan.early_stop
-        out["early_stop"] = _rows(read_curve_file(
-            f"{study}-{train_tag('ft', es.shift, es.episodes, es.steps, es.seed, prefix='es')}"))
+        out["early_stop"] = _rows(
+            read_curve_file(f"{study}-{train_tag('ft', es.shift, es.episodes, es.steps, es.seed, prefix='es')}")
+        )
     return out
 
 
@@ -148,21 +159,26 @@ def _curve(rows: Sequence[Mapping] | None) -> list[CurveRow]:
 
 # --- tables ---------------------------------------------------------------------------------------------------------
 
+
 def challenge_table(records: Mapping[str, Any]) -> str:
     """Table 5.1: the base policy on the base task and each shift, the drop in points, the study's figures."""
     plan = records["plan"]
     bp = records["base_policy"]
     base = count(bp.get("base"))
-    lines = ["| task | base policy (ours) | change, points (ours) | study (real robot) | study change |",
-             "|---|---|---|---|---|"]
+    lines = [
+        "| task | base policy (ours) | change, points (ours) | study (real robot) | study change |",
+        "|---|---|---|---|---|",
+    ]
     lines.append(f"| base task | {'-' if base is None else base.pct()} | - | {ref.BASE_TASK}% | - |")
     for s in plan["shifts"]:
         c = count(bp.get(s))
         drop = "-" if c is None or base is None else points(c, base)
         study = ref.CHALLENGE.get(ref.study_shift(s))
-        lines.append(f"| {_pretty(s)} | {'-' if c is None else c.pct()} | {drop} | "
-                     f"{'-' if study is None else f'{study}%'} | "
-                     f"{'-' if study is None else f'{study - ref.BASE_TASK:+d}'} |")
+        lines.append(
+            f"| {_pretty(s)} | {'-' if c is None else c.pct()} | {drop} | "
+            f"{'-' if study is None else f'{study}%'} | "
+            f"{'-' if study is None else f'{study - ref.BASE_TASK:+d}'} |"
+        )
     return "\n".join(lines)
 
 
@@ -181,8 +197,13 @@ def tiers_table(records: Mapping[str, Any]) -> str:
         lines.append("| " + " | ".join(cells) + " |")
         study = ref.FINETUNE.get(ref.study_shift(shift))
         if study is not None:
-            cells = ["", "study", f"{study['base']}%", *[f"{study[k]}%" if k in study else "-" for k in tiers],
-                     *[f"{study[m]}%" if m in study else "-" for m in baselines]]
+            cells = [
+                "",
+                "study",
+                f"{study['base']}%",
+                *[f"{study[k]}%" if k in study else "-" for k in tiers],
+                *[f"{study[m]}%" if m in study else "-" for m in baselines],
+            ]
             lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -201,9 +222,17 @@ def tiers_base_table(records: Mapping[str, Any]) -> str:
         cells += ["-" if (c := pooled(row["baselines_base"][m])) is None else c.pct() for m in baselines]
         lines.append("| " + " | ".join(cells) + " |")
     s = ref.FINETUNE["base"]
-    lines.append("| study (base task, real robot) | " + " | ".join(
-        [f"{s['base']}%", *[f"{s[k]}%" if k in s else "-" for k in tiers],
-         *[f"{s[m]}%" if m in s else "-" for m in baselines]]) + " |")
+    lines.append(
+        "| study (base task, real robot) | "
+        + " | ".join(
+            [
+                f"{s['base']}%",
+                *[f"{s[k]}%" if k in s else "-" for k in tiers],
+                *[f"{s[m]}%" if m in s else "-" for m in baselines],
+            ]
+        )
+        + " |"
+    )
     return "\n".join(lines)
 
 
@@ -219,7 +248,7 @@ def continual_matrix(records: Mapping[str, Any]) -> PerformanceMatrix | None:
     success = [[None if x is None else count(x).rate for x in r] for r in rows]
     episodes = [[None if x is None else count(x).episodes for x in r] for r in rows]
     single = {s: count(v).rate for s, v in c["single"].items() if v is not None}
-    stages = ["base", *c["tasks"][1:]][:len(rows)]
+    stages = ["base", *c["tasks"][1:]][: len(rows)]
     return PerformanceMatrix(tuple(c["tasks"]), tuple(stages), success, episodes, "base", single or None)
 
 
@@ -231,8 +260,11 @@ def continual_table(records: Mapping[str, Any]) -> str:
     c = records["continual"]
     cells = c["cells"]
     tasks = c["tasks"]
-    lines = ["| stage task | continual (own stage) | vs base policy | single-step from base | vs single | final | "
-             "study: final | study: vs single |", "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| stage task | continual (own stage) | vs base policy | single-step from base | vs single | final | "
+        "study: final | study: vs single |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     T = len(m.stages) - 1
     for i, task in enumerate(tasks[1:], 1):
         j = tasks.index(task)
@@ -240,15 +272,24 @@ def continual_table(records: Mapping[str, Any]) -> str:
         base = count(cells[0][j])
         single = count(c["single"].get(task))
         final = count(cells[T][j]) if T >= 1 else None
-        lines.append(
-            f"| {_pretty(task)} | {'-' if own is None else own.pct()} | "
-            f"{'-' if own is None or base is None else points(own, base)} | {'-' if single is None else single.pct()} | "
-            f"{'-' if own is None or single is None else points(own, single)} | {'-' if final is None else final.pct()} | "
-            f"{ref.CONTINUAL.get(ref.study_shift(task), '-')}% | {ref.CONTINUAL_VS_SINGLE.get(ref.study_shift(task), 0):+d} |")
+        study_task = ref.study_shift(task)
+        cols = [
+            _pretty(task),
+            "-" if own is None else own.pct(),
+            "-" if own is None or base is None else points(own, base),
+            "-" if single is None else single.pct(),
+            "-" if own is None or single is None else points(own, single),
+            "-" if final is None else final.pct(),
+            f"{ref.CONTINUAL.get(study_task, '-')}%",
+            f"{ref.CONTINUAL_VS_SINGLE.get(study_task, 0):+d}",
+        ]
+        lines.append("| " + " | ".join(cols) + " |")
     b0, bT = count(cells[0][0]), count(cells[T][0])
     if b0 is not None and bT is not None:
-        lines.append(f"| base task | {b0.pct()} (base policy) | - | - | - | {bT.pct()} ({points(bT, b0)}) | "
-                     f"no forgetting found | - |")
+        lines.append(
+            f"| base task | {b0.pct()} (base policy) | - | - | - | {bT.pct()} ({points(bT, b0)}) | "
+            f"no forgetting found | - |"
+        )
     return "\n".join(lines)
 
 
@@ -262,9 +303,11 @@ def matrix_table(records: Mapping[str, Any]) -> str:
         lines.append(f"| {i}: {_pretty(stage)} | " + " | ".join(cells) + " |")
     metrics = continual_metrics(m)
     lines.append("")
-    lines.append(f"Average forgetting {_pts(metrics.average_forgetting)} points, backward transfer "
-                 f"{_pts(metrics.average_backward_transfer)} points, average final success "
-                 f"{_pct(metrics.average_final_success)} (eval.continual's definitions).")
+    lines.append(
+        f"Average forgetting {_pts(metrics.average_forgetting)} points, backward transfer "
+        f"{_pts(metrics.average_backward_transfer)} points, average final success "
+        f"{_pct(metrics.average_final_success)} (eval.continual's definitions)."
+    )
     return "\n".join(lines)
 
 
@@ -281,8 +324,11 @@ def curves_table(records: Mapping[str, Any]) -> str:
     curves = records.get("curves")
     if not curves:
         return "(no method curves yet)"
-    lines = ["| method | seeds | target at step 0 | best target (step) | target at last step | base task at last step "
-             "| study (sim, Fig. 5.4) |", "|---|---|---|---|---|---|---|"]
+    lines = [
+        "| method | seeds | target at step 0 | best target (step) | target at last step | base task at last step "
+        "| study (sim, Fig. 5.4) |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for method, by_seed in curves.items():
         pts = mean_curve(by_seed, "target")
         basepts = mean_curve(by_seed, "base")
@@ -290,9 +336,11 @@ def curves_table(records: Mapping[str, Any]) -> str:
             lines.append(f"| {method} | {len(by_seed)} | - | - | - | - | {ref.CURVES.get(method, '-')} |")
             continue
         best = max(pts, key=lambda p: (p[1].rate, -p[0]))
-        lines.append(f"| {method} | {len(by_seed)} | {pts[0][1].pct()} | {best[1].pct()} ({best[0]}) | "
-                     f"{pts[-1][1].pct()} | {basepts[-1][1].pct() if basepts else '-'} | "
-                     f"{ref.CURVES.get(method, '-')} |")
+        lines.append(
+            f"| {method} | {len(by_seed)} | {pts[0][1].pct()} | {best[1].pct()} ({best[0]}) | "
+            f"{pts[-1][1].pct()} | {basepts[-1][1].pct() if basepts else '-'} | "
+            f"{ref.CURVES.get(method, '-')} |"
+        )
     return "\n".join(lines)
 
 
@@ -330,8 +378,10 @@ def early_stop_table(records: Mapping[str, Any]) -> str:
     choices = early_stop_choices(records)
     if not choices:
         return "(no early-stopping curve yet)"
-    lines = ["| criterion | chosen step | target success | base task | points below the best |",
-             "|---|---|---|---|---|"]
+    lines = [
+        "| criterion | chosen step | target success | base task | points below the best |",
+        "|---|---|---|---|---|",
+    ]
     best = choices.get("best")
     for name, c in choices.items():
         label = {"best": "best point (oracle)", "final": "last step (no stopping)"}.get(name, name)
@@ -339,12 +389,15 @@ def early_stop_table(records: Mapping[str, Any]) -> str:
             lines.append(f"| {label} | no choice | - | - | - |")
             continue
         regret = "-" if c.target_regret is None else f"{100 * c.target_regret:.0f}"
-        lines.append(f"| {label} | {c.step} | {'-' if c.target is None else c.target.percent()} | "
-                     f"{'-' if c.base is None else c.base.percent()} | {regret if best is not None else '-'} |")
+        lines.append(
+            f"| {label} | {c.step} | {'-' if c.target is None else c.target.percent()} | "
+            f"{'-' if c.base is None else c.base.percent()} | {regret if best is not None else '-'} |"
+        )
     return "\n".join(lines)
 
 
 # --- findings -------------------------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class Finding:
@@ -368,14 +421,28 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
     # (a) every shift costs the base policy at least 10 points
     drops = {s: (base, count(bp.get(s))) for s in plan["shifts"]}
     measured = {s: v for s, v in drops.items() if v[0] is not None and v[1] is not None}
-    holds = None if len(measured) < len(drops) else all(diff_interval(a, b)[0] >= 0.10 - 1e-12
-                                                         for a, b in measured.values())
-    out.append(Finding("a", "every shift costs the base policy at least 10 points", holds,
-                       "drops of " + "; ".join(f"{_pretty(s)} {points(a, b)}" for s, (a, b) in measured.items())
-                       if measured else "-",
-                       "drops of " + "; ".join(f"{_pretty(ref.study_shift(s))} {ref.STUDY_DROPS[ref.study_shift(s)]}"
-                                               for s in plan["shifts"] if ref.study_shift(s) in ref.STUDY_DROPS)
-                       + " points (10-55)"))
+    holds = (
+        None
+        if len(measured) < len(drops)
+        else all(diff_interval(a, b)[0] >= 0.10 - 1e-12 for a, b in measured.values())
+    )
+    out.append(
+        Finding(
+            "a",
+            "every shift costs the base policy at least 10 points",
+            holds,
+            "drops of " + "; ".join(f"{_pretty(s)} {points(a, b)}" for s, (a, b) in measured.items())
+            if measured
+            else "-",
+            "drops of "
+            + "; ".join(
+                f"{_pretty(ref.study_shift(s))} {ref.STUDY_DROPS[ref.study_shift(s)]}"
+                for s in plan["shifts"]
+                if ref.study_shift(s) in ref.STUDY_DROPS
+            )
+            + " points (10-55)",
+        )
+    )
     # (b) fine-tuning on the top tier gains at least the study's +27 points on average; reaches base on 2 of 5
     top = str(plan["finetune"]["tiers"][-1])
     gains, reached, parts = [], [], []
@@ -392,13 +459,22 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
         holds_b = None
     else:
         holds_b = sum(gains) / n >= ref.STUDY_MEAN_GAIN_800 / 100 and len(reached) >= 2 * n / 5
-    out.append(Finding(
-        "b", f"fine-tuning on {top} episodes gains at least as much as the study's (mean +27 points; reaches the base "
-             "policy's base-task success on 2 of 5 shifts)", holds_b,
-        (f"mean {100 * sum(gains) / len(gains):+.0f} points ({'; '.join(parts)}); reaches the base policy's "
-         f"base-task success on {len(reached)} of {n}" + (f" ({', '.join(map(_pretty, reached))})" if reached else ""))
-        if gains else "-",
-        "mean +27 points over the five shifts (800 attempts); 2 of 5 reached 86% (checkerboard, offset gripper)"))
+    out.append(
+        Finding(
+            "b",
+            f"fine-tuning on {top} episodes gains at least as much as the study's (mean +27 points; reaches the base "
+            "policy's base-task success on 2 of 5 shifts)",
+            holds_b,
+            (
+                f"mean {100 * sum(gains) / len(gains):+.0f} points ({'; '.join(parts)}); reaches the base policy's "
+                f"base-task success on {len(reached)} of {n}"
+                + (f" ({', '.join(map(_pretty, reached))})" if reached else "")
+            )
+            if gains
+            else "-",
+            "mean +27 points over the five shifts (800 attempts); 2 of 5 reached 86% (checkerboard, offset gripper)",
+        )
+    )
     # (c) fine-tuning beats scratch at the top tier by 30 points or more
     parts, diffs = [], []
     for shift, row in records["finetune"].items():
@@ -409,10 +485,15 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
         parts.append(f"{_pretty(shift)} {points(ft, sc)}")
     has_scratch = "scratch" in plan["finetune"]["baselines"]
     holds_c = None if not has_scratch or len(diffs) < n else all(d >= 0.30 - 1e-12 for d in diffs)
-    out.append(Finding("c", f"fine-tuning beats scratch at {top} episodes by 30 points or more on every shift", holds_c,
-                       "; ".join(parts) or "-",
-                       "+" + ", +".join(str(v[800] - v["scratch"]) for k, v in ref.FINETUNE.items() if k != "base")
-                       + " points"))
+    out.append(
+        Finding(
+            "c",
+            f"fine-tuning beats scratch at {top} episodes by 30 points or more on every shift",
+            holds_c,
+            "; ".join(parts) or "-",
+            "+" + ", +".join(str(v[800] - v["scratch"]) for k, v in ref.FINETUNE.items() if k != "base") + " points",
+        )
+    )
     # (d) the continual sequence loses 5 points or less on the base task
     holds_d, ours_d = None, "-"
     m = continual_matrix(records)
@@ -423,8 +504,15 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
             d = diff_interval(b0, bT)
             holds_d = d[0] <= 0.05 + 1e-12
             ours_d = f"base task {b0.pct()} before, {bT.pct()} after the last stage: lost {points(b0, bT)} points"
-    out.append(Finding("d", "the continual sequence loses 5 points or less on the base task", holds_d, ours_d,
-                       "no forgetting of the base task was found"))
+    out.append(
+        Finding(
+            "d",
+            "the continual sequence loses 5 points or less on the base task",
+            holds_d,
+            ours_d,
+            "no forgetting of the base task was found",
+        )
+    )
     # (e) an offline stopping criterion lands within 5 points of the best point
     choices = early_stop_choices(records)
     holds_e, ours_e = None, "-"
@@ -440,8 +528,15 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
             parts.append(f"{crit}: step {ch.step}, {ch.target.percent()}, {100 * ch.target_regret:.0f} points below")
         holds_e = None if not regrets else min(regrets) <= 0.05 + 1e-12
         ours_e = f"best point step {best.step}, {best.target.percent()}; " + "; ".join(parts)
-    out.append(Finding("e", "an offline stopping criterion lands within 5 points of the best point", holds_e, ours_e,
-                       "not solved in the study (" + ref.EARLY_STOP + ")"))
+    out.append(
+        Finding(
+            "e",
+            "an offline stopping criterion lands within 5 points of the best point",
+            holds_e,
+            ours_e,
+            "not solved in the study (" + ref.EARLY_STOP + ")",
+        )
+    )
     return out
 
 
@@ -453,6 +548,7 @@ def findings_table(items: Sequence[Finding]) -> str:
 
 
 # --- plots ----------------------------------------------------------------------------------------------------------
+
 
 def plot_tiers(records: Mapping[str, Any], path: Path) -> Path:
     """Success against target episodes per shift (ours solid with 95% intervals, the study's dotted)."""
@@ -473,8 +569,10 @@ def plot_tiers(records: Mapping[str, Any], path: Path) -> Path:
         if pts:
             x = [k for k, _ in pts]
             y = [100 * c.rate for _, c in pts]
-            err = [[max(0.0, 100 * (c.rate - c.ci[0])) for _, c in pts], [max(0.0, 100 * (c.ci[1] - c.rate))
-                                                                          for _, c in pts]]
+            err = [
+                [max(0.0, 100 * (c.rate - c.ci[0])) for _, c in pts],
+                [max(0.0, 100 * (c.ci[1] - c.rate)) for _, c in pts],
+            ]
             ax.errorbar(x, y, yerr=err, fmt="o-", color=colour, capsize=3, ms=4, label=_pretty(shift))
         study = ref.FINETUNE.get(ref.study_shift(shift))
         if study is not None:
@@ -499,21 +597,25 @@ def plot_curves(records: Mapping[str, Any], path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
-    for ax, which, title in ((axes[0], "target", f"target: {_pretty(records['plan']['curves']['shift'])}"),
-                             (axes[1], "base", "base task")):
+    for ax, which, title in (
+        (axes[0], "target", f"target: {_pretty(records['plan']['curves']['shift'])}"),
+        (axes[1], "base", "base task"),
+    ):
         for i, (method, by_seed) in enumerate(records["curves"].items()):
             colour = f"C{i % 10}"
             for rows in by_seed.values():
                 seed_pts = mean_curve({"_": rows}, which)
                 if seed_pts:
-                    ax.plot([s for s, _ in seed_pts], [100 * c.rate for _, c in seed_pts], color=colour, alpha=0.25,
-                            lw=0.8)
+                    ax.plot(
+                        [s for s, _ in seed_pts], [100 * c.rate for _, c in seed_pts], color=colour, alpha=0.25, lw=0.8
+                    )
             pts = mean_curve(by_seed, which)
             if pts:
                 x = [s for s, _ in pts]
                 ax.plot(x, [100 * c.rate for _, c in pts], "o-", color=colour, ms=3, label=method)
-                ax.fill_between(x, [100 * c.ci[0] for _, c in pts], [100 * c.ci[1] for _, c in pts], color=colour,
-                                alpha=0.15)
+                ax.fill_between(
+                    x, [100 * c.ci[0] for _, c in pts], [100 * c.ci[1] for _, c in pts], color=colour, alpha=0.15
+                )
         ax.set_title(title)
         ax.set_xlabel("gradient steps")
         ax.grid(alpha=0.3)
@@ -532,8 +634,9 @@ def plot_early_stop(records: Mapping[str, Any], path: Path) -> Path:
 
 
 def _save(fig, path: Path) -> Path:
-    from nsl.workspace import atomic_write_bytes
     import io
+
+    from nsl.workspace import atomic_write_bytes
 
     buf = io.BytesIO()
     fig.tight_layout()
@@ -547,12 +650,15 @@ def _save(fig, path: Path) -> Path:
 
 # --- the document ---------------------------------------------------------------------------------------------------
 
+
 def _recipe_note(recipe: Mapping[str, Any] | None) -> str:
     """What the fine-tunes' checkpoints record beyond the plan: the rate, n-step, crop and conservative term."""
     if not recipe:
         return ""
-    return (f" (learning rate {recipe['lr']:.3g}, {recipe['n_step']}-step returns, crop {recipe['augment_crop']}, "
-            f"conservative term {recipe['conservative'] or 0:g})")
+    return (
+        f" (learning rate {recipe['lr']:.3g}, {recipe['n_step']}-step returns, crop {recipe['augment_crop']}, "
+        f"conservative term {recipe['conservative'] or 0:g})"
+    )
 
 
 def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures: Mapping[str, str]) -> str:
@@ -562,51 +668,86 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
     seconds = sum(u.get("seconds") or 0 for u in units.values())
     done = sum(u.get("state") == "done" for u in units.values())
     c = plan["collect"]
-    parts = [f"# Study `{records['study']}`", "",
-             f"Plan: base `{plan['base']}`, shifts {', '.join(plan['shifts'])}; target data collected by the base "
-             f"policy with **epsilon {c['epsilon']}** (random action probability per step), {c['episodes']} episodes "
-             f"per shift (seed {c['seed']}); evaluations on {plan['eval']['episodes']} test-object scenes per cell "
-             f"(scene seed {plan['eval']['seed']}, paired across checkpoints); base-task data: "
-             f"{plan['base_data']['source']}"
-             + ("" if plan['base_data'].get('verify', True)
-                else " (**hashes not checked**: base_data.verify = false)") + ".", "",
-             f"Units done: {done} of {len(units)}; time spent in units: {seconds / 60:.1f} minutes.",
-             "Every 'study' figure is the real-robot result of the source study (Never Stop Learning, Tables 5.1-5.3); ours are "
-             "simulation, with 95% Wilson intervals (differences: Newcombe intervals).", "",
-             "## Findings", "", findings_table(findings(records)), "",
-             "## Challenge table (Table 5.1)", "", challenge_table(records), "",
-             "## Fine-tuning by data size (Table 5.2)", "",
-             f"Fine-tune all parameters from the base, batches 50/50 base data and the first K target episodes, "
-             f"25% of the base's learning rate and its n-step returns and crop, {plan['finetune']['steps']} steps"
-             f"{_recipe_note(records.get('recipe'))}, seeds "
-             f"{', '.join(map(str, plan['finetune']['seeds']))} (pooled). Success on the shift:", "", tiers_table(records), ""]
+    parts = [
+        f"# Study `{records['study']}`",
+        "",
+        f"Plan: base `{plan['base']}`, shifts {', '.join(plan['shifts'])}; target data collected by the base "
+        f"policy with **epsilon {c['epsilon']}** (random action probability per step), {c['episodes']} episodes "
+        f"per shift (seed {c['seed']}); evaluations on {plan['eval']['episodes']} test-object scenes per cell "
+        f"(scene seed {plan['eval']['seed']}, paired across checkpoints); base-task data: "
+        f"{plan['base_data']['source']}"
+        + ("" if plan["base_data"].get("verify", True) else " (**hashes not checked**: base_data.verify = false)")
+        + ".",
+        "",
+        f"Units done: {done} of {len(units)}; time spent in units: {seconds / 60:.1f} minutes.",
+        "Every 'study' figure is the real-robot result of the source study (Never Stop Learning, Tables 5.1-5.3); "
+        "ours are "
+        "simulation, with 95% Wilson intervals (differences: Newcombe intervals).",
+        "",
+        "## Findings",
+        "",
+        findings_table(findings(records)),
+        "",
+        "## Challenge table (Table 5.1)",
+        "",
+        challenge_table(records),
+        "",
+        "## Fine-tuning by data size (Table 5.2)",
+        "",
+        f"Fine-tune all parameters from the base, batches 50/50 base data and the first K target episodes, "
+        f"25% of the base's learning rate and its n-step returns and crop, {plan['finetune']['steps']} steps"
+        f"{_recipe_note(records.get('recipe'))}, seeds "
+        f"{', '.join(map(str, plan['finetune']['seeds']))} (pooled). Success on the shift:",
+        "",
+        tiers_table(records),
+        "",
+    ]
     if "tiers" in figures:
         parts += [f"![fine-tuning by data size]({figures['tiers']})", ""]
     parts += ["The same checkpoints on the base task:", "", tiers_base_table(records), ""]
     if plan.get("continual"):
-        parts += ["## The continual sequence (Table 5.3)", "",
-                  f"{' -> '.join(['base', *plan['continual']['sequence']])}; each stage's policy collects "
-                  f"{plan['continual']['episodes']} episodes and fine-tunes from the previous stage, "
-                  f"{plan['continual']['steps']} steps. Single-step: the base fine-tuned on the base policy's "
-                  "episodes of that shift (same size and steps).", "", continual_table(records), "",
-                  "Performance matrix (rows: after each stage; columns: evaluated task):", "", matrix_table(records),
-                  ""]
+        parts += [
+            "## The continual sequence (Table 5.3)",
+            "",
+            f"{' -> '.join(['base', *plan['continual']['sequence']])}; each stage's policy collects "
+            f"{plan['continual']['episodes']} episodes and fine-tunes from the previous stage, "
+            f"{plan['continual']['steps']} steps. Single-step: the base fine-tuned on the base policy's "
+            "episodes of that shift (same size and steps).",
+            "",
+            continual_table(records),
+            "",
+            "Performance matrix (rows: after each stage; columns: evaluated task):",
+            "",
+            matrix_table(records),
+            "",
+        ]
     if plan.get("curves"):
         cv = plan["curves"]
-        parts += ["## Method curves (Figs. 5.4 and 5.9)", "",
-                  f"{_pretty(cv['shift'])}, {cv['episodes']} target episodes, evaluated every {cv['every']} steps on "
-                  f"{cv['eval_episodes']} scenes (target and base task), seeds {', '.join(map(str, cv['seeds']))}.", "",
-                  curves_table(records), ""]
+        parts += [
+            "## Method curves (Figs. 5.4 and 5.9)",
+            "",
+            f"{_pretty(cv['shift'])}, {cv['episodes']} target episodes, evaluated every {cv['every']} steps on "
+            f"{cv['eval_episodes']} scenes (target and base task), seeds {', '.join(map(str, cv['seeds']))}.",
+            "",
+            curves_table(records),
+            "",
+        ]
         if "curves" in figures:
             parts += [f"![method curves]({figures['curves']})", ""]
     if plan.get("early_stop"):
         es = plan["early_stop"]
-        parts += ["## Overfitting and early stopping (Fig. 5.7)", "",
-                  f"{_pretty(es['shift'])}, {es['episodes']} target episodes ({int(es['holdout'] * 100)}% held out "
-                  f"for the offline criteria), {es['steps']} steps, evaluated every {es['every']} steps on "
-                  f"{es['eval_episodes']} scenes; each criterion replayed with patience {es['patience']}. The 'eval' "
-                  "criterion and the oracle see the same scenes. A criterion with no values on the curve made no "
-                  "choice.", "", early_stop_table(records), ""]
+        parts += [
+            "## Overfitting and early stopping (Fig. 5.7)",
+            "",
+            f"{_pretty(es['shift'])}, {es['episodes']} target episodes ({int(es['holdout'] * 100)}% held out "
+            f"for the offline criteria), {es['steps']} steps, evaluated every {es['every']} steps on "
+            f"{es['eval_episodes']} scenes; each criterion replayed with patience {es['patience']}. The 'eval' "
+            "criterion and the oracle see the same scenes. A criterion with no values on the curve made no "
+            "choice.",
+            "",
+            early_stop_table(records),
+            "",
+        ]
         if "early_stop" in figures:
             parts += [f"![early stopping]({figures['early_stop']})", ""]
     return "\n".join(parts)

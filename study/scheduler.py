@@ -42,7 +42,7 @@ class UnitFailed(NslError):
 
 
 def _now() -> str:
-    return dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
+    return dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
 
 
 def read_status(path: Path) -> dict[str, Any]:
@@ -88,13 +88,11 @@ class _Status:
     def __init__(self, path: Path, graph: nx.DiGraph, meta: dict[str, Any]):
         self.path = Path(path)
         old = read_status(self.path).get("units", {})
-        self.data = {**meta, "pid": os.getpid(), "state": "running", "started": _now(), "updated": _now(),
-                     "units": {}}
+        self.data = {**meta, "pid": os.getpid(), "state": "running", "started": _now(), "updated": _now(), "units": {}}
         for name in order(graph):
             u: Unit = graph.nodes[name]["unit"]
             prev = old.get(name, {})
-            self.data["units"][name] = {"kind": u.kind, "state": "left", "seconds": prev.get("seconds"),
-                                        "error": None}
+            self.data["units"][name] = {"kind": u.kind, "state": "left", "seconds": prev.get("seconds"), "error": None}
 
     def set(self, name: str, state: str, seconds: float | None = None, error: str | None = None) -> None:
         rec = self.data["units"][name]
@@ -124,9 +122,16 @@ def _child(execute: Callable, unit: Unit, inner_workers: int, threads: int, queu
         queue.put((unit.name, msg, None))
 
 
-def run_graph(graph: nx.DiGraph, status_path: Path, *, execute: Callable[[Unit, int, bool], dict],
-              is_done: Callable[[Unit], bool], workers: int = 1, progress: bool = True,
-              meta: dict[str, Any] | None = None) -> dict[str, Any]:
+def run_graph(
+    graph: nx.DiGraph,
+    status_path: Path,
+    *,
+    execute: Callable[[Unit, int, bool], dict],
+    is_done: Callable[[Unit], bool],
+    workers: int = 1,
+    progress: bool = True,
+    meta: dict[str, Any] | None = None,
+) -> dict[str, Any]:
     """Run every unit not yet done; returns the final status record.  Raises UnitFailed if a unit fails."""
     from nsl.progress import progress_bar
 
@@ -142,16 +147,24 @@ def run_graph(graph: nx.DiGraph, status_path: Path, *, execute: Callable[[Unit, 
     status.save()
     cpus = os.cpu_count() or 1
     inner = max(1, cpus // workers)
-    bar = progress_bar(total=len(names), initial=len(done), unit="unit", desc="study", disable=not progress,
-               dynamic_ncols=True, position=0)
+    bar = progress_bar(
+        total=len(names),
+        initial=len(done),
+        unit="unit",
+        desc="study",
+        disable=not progress,
+        dynamic_ncols=True,
+        position=0,
+    )
     failed: list[str] = []
     running: dict[str, tuple[Any, float]] = {}
     ctx = mp.get_context("spawn")
     queue = ctx.Queue() if workers > 1 else None
 
     def ready() -> list[str]:
-        return [n for n in names if n not in done and n not in running
-                and all(d in done for d in graph.predecessors(n))]
+        return [
+            n for n in names if n not in done and n not in running and all(d in done for d in graph.predecessors(n))
+        ]
 
     try:
         while True:
@@ -170,16 +183,19 @@ def run_graph(graph: nx.DiGraph, status_path: Path, *, execute: Callable[[Unit, 
                     msg = str(e) if isinstance(e, NslError) else f"{type(e).__name__}: {e}"
                     status.set(name, "failed", time.perf_counter() - t0, msg)
                     status.save("failed")
-                    raise UnitFailed(f"unit {name}: {msg}; fix it and run the same command again to resume "
-                                     "(--debug shows the traceback)") from e
+                    raise UnitFailed(
+                        f"unit {name}: {msg}; fix it and run the same command again to resume "
+                        "(--debug shows the traceback)"
+                    ) from e
                 status.set(name, "done", time.perf_counter() - t0)
                 done.add(name)
                 bar.update(1)
                 continue
-            for name in todo[:workers - len(running)]:
+            for name in todo[: workers - len(running)]:
                 unit = graph.nodes[name]["unit"]
-                proc = ctx.Process(target=_child, args=(execute, unit, 1, max(1, cpus // workers), queue),
-                                   name=f"nsl-study-{name}")
+                proc = ctx.Process(
+                    target=_child, args=(execute, unit, 1, max(1, cpus // workers), queue), name=f"nsl-study-{name}"
+                )
                 proc.start()
                 running[name] = (proc, time.perf_counter())
                 status.set(name, "running")

@@ -87,8 +87,9 @@ class TransferPlan:
         for t in self.tasks:
             if t.shift == name:
                 return t
-        raise UnknownReferenceError(f"task {name!r} is not in transfer plan {self.name!r}; its tasks: "
-                                    f"{', '.join(self.task_names)}")
+        raise UnknownReferenceError(
+            f"task {name!r} is not in transfer plan {self.name!r}; its tasks: {', '.join(self.task_names)}"
+        )
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -104,8 +105,7 @@ def _build(cls: type, d: Any, where: str):
     unknown = sorted(set(d) - set(known))
     if unknown:
         raise ConfigError(f"transfer plan [{where}] has unknown setting(s) {unknown}; known: {sorted(known)}")
-    missing = [f.name for f in fields(cls) if f.name not in d and f.default is MISSING
-               and f.default_factory is MISSING]
+    missing = [f.name for f in fields(cls) if f.name not in d and f.default is MISSING and f.default_factory is MISSING]
     if missing:
         raise ConfigError(f"transfer plan [{where}] lacks {missing}; see study/plans/transfer-small.toml")
     return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
@@ -122,14 +122,17 @@ def parse_transfer_plan(data: dict[str, Any], source: str = "", default_name: st
     """A validated :class:`TransferPlan` from parsed TOML (raises one ConfigError / UnknownReferenceError)."""
     raw = data.get("tasks")
     if not isinstance(raw, (list, tuple)) or not raw:
-        raise ConfigError("transfer plan has no [[tasks]]; list at least two, each with shift, checkpoint, data and "
-                          "episodes (see study/plans/transfer-small.toml)")
+        raise ConfigError(
+            "transfer plan has no [[tasks]]; list at least two, each with shift, checkpoint, data and "
+            "episodes (see study/plans/transfer-small.toml)"
+        )
     tasks = tuple(_task(t, i) for i, t in enumerate(raw))
     top = {k: v for k, v in data.items() if k != "tasks"}
     top.setdefault("name", default_name)
     plan = _build(TransferPlan, top, "top level")
-    plan = TransferPlan(**{**{f.name: getattr(plan, f.name) for f in fields(TransferPlan)}, "tasks": tasks,
-                           "source": source})
+    plan = TransferPlan(
+        **{**{f.name: getattr(plan, f.name) for f in fields(TransferPlan)}, "tasks": tasks, "source": source}
+    )
     return validate_transfer(plan)
 
 
@@ -148,11 +151,15 @@ def validate_transfer(plan: TransferPlan) -> TransferPlan:
     for i, t in enumerate(plan.tasks):
         shift = _shift(t.shift, f"tasks[{i}].shift") if t.shift != "base" else "base"
         if not isinstance(t.checkpoint, str) or not t.checkpoint.startswith("ckpt:"):
-            raise ConfigError(f"transfer plan tasks[{i}] ({shift}) checkpoint = {t.checkpoint!r} must be a checkpoint "
-                              "reference such as 'ckpt:base'")
+            raise ConfigError(
+                f"transfer plan tasks[{i}] ({shift}) checkpoint = {t.checkpoint!r} must be a checkpoint "
+                "reference such as 'ckpt:base'"
+            )
         if not isinstance(t.data, str) or not t.data or any(c in t.data for c in ":@/ "):
-            raise ConfigError(f"transfer plan tasks[{i}] ({shift}) data = {t.data!r} must be a dataset name (no tier "
-                              "or version: give the number of episodes as episodes = K)")
+            raise ConfigError(
+                f"transfer plan tasks[{i}] ({shift}) data = {t.data!r} must be a dataset name (no tier "
+                "or version: give the number of episodes as episodes = K)"
+            )
         _positive(t.episodes, f"tasks[{i}].episodes")
         c = t.collect
         if c is not None:
@@ -171,14 +178,16 @@ def validate_transfer(plan: TransferPlan) -> TransferPlan:
     for k in ("steps", "every", "eval_episodes", "checkpoint_every", "proxy_episodes"):
         _positive(getattr(plan, k), k)
     if plan.steps % plan.every:
-        raise ConfigError(f"transfer plan every = {plan.every} must divide steps = {plan.steps} (the curve ends at "
-                          "the last step)")
+        raise ConfigError(
+            f"transfer plan every = {plan.every} must divide steps = {plan.steps} (the curve ends at the last step)"
+        )
     if not isinstance(plan.eval_seed, int) or isinstance(plan.eval_seed, bool) or plan.eval_seed < 0:
         raise ConfigError(f"transfer plan eval_seed = {plan.eval_seed!r} must be a whole number >= 0")
     _seeds(plan.seeds, "seeds")
     if plan.auc_floor is not None and not (isinstance(plan.auc_floor, (int, float)) and 0 < plan.auc_floor <= 1):
-        raise ConfigError(f"transfer plan auc_floor = {plan.auc_floor!r} must be in (0, 1], or left out (1 / "
-                          "eval_episodes)")
+        raise ConfigError(
+            f"transfer plan auc_floor = {plan.auc_floor!r} must be in (0, 1], or left out (1 / eval_episodes)"
+        )
     return TransferPlan(**{**{f.name: getattr(plan, f.name) for f in fields(TransferPlan)}, "tasks": tuple(tasks)})
 
 
@@ -189,6 +198,7 @@ def load_transfer_plan(ref: str) -> TransferPlan:
 
 
 # --- units ----------------------------------------------------------------------------------------------------------
+
 
 def ft_tag(plan: TransferPlan, src: str, dst: str, seed: int) -> str:
     return f"ft-{slug(src)}-to-{slug(dst)}-n{plan.task(dst).episodes}-k{plan.steps}-s{seed}"
@@ -206,23 +216,46 @@ def build_transfer_units(plan: TransferPlan, base_ref: str, base: list[BaseSourc
     for t in plan.tasks:
         data_unit[t.shift] = None
         if t.collect is not None:
-            u = Unit(f"data:{t.data}", "collect", {
-                "dataset": t.data, "shift": t.shift, "policy": t.collect.policy, "policy_ref": t.collect.policy,
-                "episodes": t.episodes, "seed": t.collect.seed, "epsilon": t.collect.epsilon,
-                "batch": t.collect.batch})
+            u = Unit(
+                f"data:{t.data}",
+                "collect",
+                {
+                    "dataset": t.data,
+                    "shift": t.shift,
+                    "policy": t.collect.policy,
+                    "policy_ref": t.collect.policy,
+                    "episodes": t.episodes,
+                    "seed": t.collect.seed,
+                    "epsilon": t.collect.epsilon,
+                    "batch": t.collect.batch,
+                },
+            )
             units[u.name] = u
             data_unit[t.shift] = u.name
-    monitor = {"every": plan.every, "episodes": plan.eval_episodes, "base_episodes": 0, "seed": plan.eval_seed,
-               "holdout": None}
+    monitor = {
+        "every": plan.every,
+        "episodes": plan.eval_episodes,
+        "base_episodes": 0,
+        "seed": plan.eval_seed,
+        "holdout": None,
+    }
 
     def train(tag: str, dst: Task, method: str, init_ref: str, lr: float | None) -> None:
         deps = (*base_deps, *([data_unit[dst.shift]] if data_unit[dst.shift] else []))
         check_name("checkpoint", f"{plan.name}-{tag}")  # refused before any unit runs (a shorter name fits)
-        params = {"checkpoint": f"{plan.name}-{tag}", "shift": dst.shift, "method": method, "init": None,
-                  "init_ref": init_ref, "steps": plan.steps, "seed": seed, "base": base_mix(base),
-                  "target": {"collect": data_unit[dst.shift], "dataset": dst.data, "tier": dst.episodes,
-                             "weight": 0.5},
-                  "checkpoint_every": plan.checkpoint_every, "monitor": dict(monitor)}
+        params = {
+            "checkpoint": f"{plan.name}-{tag}",
+            "shift": dst.shift,
+            "method": method,
+            "init": None,
+            "init_ref": init_ref,
+            "steps": plan.steps,
+            "seed": seed,
+            "base": base_mix(base),
+            "target": {"collect": data_unit[dst.shift], "dataset": dst.data, "tier": dst.episodes, "weight": 0.5},
+            "checkpoint_every": plan.checkpoint_every,
+            "monitor": dict(monitor),
+        }
         if lr is not None:
             params["lr"] = lr
         units[f"train:{tag}"] = Unit(f"train:{tag}", "train", params, deps)

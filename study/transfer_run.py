@@ -14,7 +14,6 @@ A transfer lives in ``$NSL_HOME/transfers/NAME/``::
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -43,8 +42,9 @@ def _study_plan(plan: TransferPlan):
     try:
         return _load(plan.study)
     except UnknownReferenceError as e:
-        raise UnknownReferenceError(f"transfer plan study = {plan.study!r}: {e} (the transfer uses its base data "
-                                    "and checkpoints)") from None
+        raise UnknownReferenceError(
+            f"transfer plan study = {plan.study!r}: {e} (the transfer uses its base data and checkpoints)"
+        ) from None
 
 
 def _check_workspace(plan: TransferPlan) -> None:
@@ -55,18 +55,24 @@ def _check_workspace(plan: TransferPlan) -> None:
         try:
             actions.resolve_checkpoint(t.checkpoint)
         except UnknownReferenceError as e:
-            raise UnknownReferenceError(f"transfer task {t.shift}: checkpoint {t.checkpoint} is not catalogued ({e}); "
-                                        f"run `nsl study run {plan.study}` first, or fix the reference") from None
+            raise UnknownReferenceError(
+                f"transfer task {t.shift}: checkpoint {t.checkpoint} is not catalogued ({e}); "
+                f"run `nsl study run {plan.study}` first, or fix the reference"
+            ) from None
         if t.collect is not None:
             continue
         versions = api.list_versions(t.data)
         if not versions:
-            raise UnknownReferenceError(f"transfer task {t.shift}: dataset {t.data!r} is not in {workspace.home()}; "
-                                        f"run `nsl study run {plan.study}` first, or add a collect recipe to the task")
+            raise UnknownReferenceError(
+                f"transfer task {t.shift}: dataset {t.data!r} is not in {workspace.home()}; "
+                f"run `nsl study run {plan.study}` first, or add a collect recipe to the task"
+            )
         n = api.open_version(f"{t.data}@v{versions[-1]}").num_episodes
         if n < t.episodes:
-            raise ConfigError(f"transfer task {t.shift}: dataset {t.data} has {n} episodes, fewer than episodes = "
-                              f"{t.episodes}; lower it or collect more")
+            raise ConfigError(
+                f"transfer task {t.shift}: dataset {t.data} has {n} episodes, fewer than episodes = "
+                f"{t.episodes}; lower it or collect more"
+            )
 
 
 def _ft_lr(base_ref: str) -> float:
@@ -84,8 +90,10 @@ def prepare_transfer(plan_ref: str, name: str | None = None):
         plan = parse_transfer_plan({**plan.to_dict(), "name": name}, plan.source)
     saved = transfer_dir(plan.name) / PLAN_FILE
     if saved.is_file() and json.loads(saved.read_text()) != json.loads(json.dumps(plan.to_dict())):
-        raise ConfigError(f"transfer {plan.name!r} exists with a different plan ({saved}); run it with the same plan "
-                          "to resume, or choose another --name")
+        raise ConfigError(
+            f"transfer {plan.name!r} exists with a different plan ({saved}); run it with the same plan "
+            "to resume, or choose another --name"
+        )
     study = _study_plan(plan)
     base = actions.base_sources(study)
     _check_workspace(plan)
@@ -102,14 +110,16 @@ def estimate_transfer(plan_ref: str, name: str | None = None):
     return estimate([units[n] for n in order(graph)], done)
 
 
-def run_transfer(plan_ref: str, name: str | None = None, workers: int = 1,
-                 progress: bool = True) -> tuple[dict[str, Any], dict[str, Any]]:
+def run_transfer(
+    plan_ref: str, name: str | None = None, workers: int = 1, progress: bool = True
+) -> tuple[dict[str, Any], dict[str, Any]]:
     """Run (or resume) a transfer, then write its matrix and report: (final status record, report summary)."""
     if workers < 1:
         raise ConfigError(f"--workers {workers} must be at least 1")
     plan, units, graph = prepare_transfer(plan_ref, name)
-    status = run_planned(transfer_dir(plan.name), "transfer", plan.name, plan, units, graph, workers=workers,
-                         progress=progress)
+    status = run_planned(
+        transfer_dir(plan.name), "transfer", plan.name, plan, units, graph, workers=workers, progress=progress
+    )
     return status, write_transfer_report(plan.name)
 
 
@@ -118,9 +128,10 @@ def load_saved(name: str) -> TransferPlan:
     if not path.is_file():
         root = workspace.home() / "transfers"
         known = sorted(p.name for p in root.glob("*") if (p / PLAN_FILE).is_file())
-        raise UnknownReferenceError(f"no transfer named {name!r} in {workspace.home()}; "
-                                    + (f"known: {', '.join(known)}" if known else
-                                       "start one with `nsl transfer run small`"))
+        raise UnknownReferenceError(
+            f"no transfer named {name!r} in {workspace.home()}; "
+            + (f"known: {', '.join(known)}" if known else "start one with `nsl transfer run small`")
+        )
     return parse_transfer_plan(json.loads(path.read_text()), source=str(path), default_name=name)
 
 
@@ -131,6 +142,7 @@ def transfer_status(name: str) -> dict[str, Any]:
 
 
 # --- the matrix -----------------------------------------------------------------------------------------------------
+
 
 def _curve_auc(plan: TransferPlan, tag: str) -> float | None:
     """AUC of a finished run's success curve (step 0 to the last step), or None while it is not finished."""
@@ -177,30 +189,36 @@ def measure_matrix(plan: TransferPlan):
         except UnknownReferenceError:
             checkpoints[t.shift] = None
     names = plan.task_names
-    scratch = {d: {s: a for s in plan.seeds if (a := _curve_auc(plan, scratch_tag(plan, d, s))) is not None}
-               for d in names}
+    scratch = {
+        d: {s: a for s in plan.seeds if (a := _curve_auc(plan, scratch_tag(plan, d, s))) is not None} for d in names
+    }
     ft: dict[tuple[str, str], dict[int, float]] = {}
     entries = {}
     for d in names:
         for s_ in names:
             if s_ != d:
-                ft[(s_, d)] = {s: a for s in plan.seeds
-                               if (a := _curve_auc(plan, ft_tag(plan, s_, d, s))) is not None}
+                ft[(s_, d)] = {s: a for s in plan.seeds if (a := _curve_auc(plan, ft_tag(plan, s_, d, s))) is not None}
                 entries[(s_, d)] = advantage(ft[(s_, d)], scratch[d], plan.floor)
     proxies = _proxies(plan, checkpoints)
     adv = {p: e.value for p, e in entries.items()}
     correlation = {k: rank_correlation({p: v.get(k) for p, v in proxies.items()}, adv).to_dict() for k in PROXIES}
     meta = {
-        "transfer": plan.name, "study": plan.study, "plan": plan.to_dict(), "code_version": code_version(),
+        "transfer": plan.name,
+        "study": plan.study,
+        "plan": plan.to_dict(),
+        "code_version": code_version(),
         "auc_floor": plan.floor,
-        "definitions": {"auc": "trapezoid area under the success curve from step 0 to the last step, divided by "
-                               "the step range (nsl.eval.curve_auc)",
-                        "advantage": "mean over seeds of AUC(fine-tune, seed s) / max(AUC(scratch, seed s), "
-                                     "auc_floor); interval: 95% Student-t over seeds",
-                        "proxy": "Q-ranking AUC and SoftOPC of the source checkpoint on the target's first "
-                                 "proxy_episodes episodes"},
-        "checkpoints": {t: None if e is None else {"ref": plan.task(t).checkpoint, "id": e.id, "resolved": e.ref}
-                        for t, e in checkpoints.items()},
+        "definitions": {
+            "auc": "trapezoid area under the success curve from step 0 to the last step, divided by "
+            "the step range (nsl.eval.curve_auc)",
+            "advantage": "mean over seeds of AUC(fine-tune, seed s) / max(AUC(scratch, seed s), "
+            "auc_floor); interval: 95% Student-t over seeds",
+            "proxy": "Q-ranking AUC and SoftOPC of the source checkpoint on the target's first proxy_episodes episodes",
+        },
+        "checkpoints": {
+            t: None if e is None else {"ref": plan.task(t).checkpoint, "id": e.id, "resolved": e.ref}
+            for t, e in checkpoints.items()
+        },
         "scratch_auc": {d: {str(s): a for s, a in v.items()} for d, v in scratch.items()},
         "ft_auc": {s_: {d: {str(s): a for s, a in ft[(s_, d)].items()} for d in names if d != s_} for s_ in names},
         "entries": {s_: {d: entries[(s_, d)].to_dict() for d in names if d != s_} for s_ in names},
@@ -218,24 +236,43 @@ def _render(matrix, status: dict[str, Any], figure: str | None, curriculum) -> s
     plan = meta["plan"]
     units = status.get("units", {})
     done = sum(u["state"] == "done" for u in units.values())
-    lines = [f"# Transfer matrix: {meta['transfer']}", "",
-             f"Study `{meta['study']}`; {len(matrix.tasks)} tasks; every run {plan['steps']} gradient steps, "
-             f"success on the target every {plan['every']} steps on {plan['eval_episodes']} scenes (seed "
-             f"{plan['eval_seed']}); training seeds {list(plan['seeds'])}; {done} of {len(units)} units done.",
-             "Definitions: docs/transfer.md.  A > 1: fine-tuning from the row's checkpoint learns the column's task "
-             "faster than from scratch.", "",
-             "## Advantage A(row -> column), mean over seeds [95% interval over seeds]", "", matrix.markdown(), "",
-             f"## AUC of training from scratch (floor {meta['auc_floor']:.3f})", "",
-             "| task | " + " | ".join(f"seed {s}" for s in plan["seeds"]) + " |",
-             "|---|" + "---|" * len(plan["seeds"])]
+    lines = [
+        f"# Transfer matrix: {meta['transfer']}",
+        "",
+        f"Study `{meta['study']}`; {len(matrix.tasks)} tasks; every run {plan['steps']} gradient steps, "
+        f"success on the target every {plan['every']} steps on {plan['eval_episodes']} scenes (seed "
+        f"{plan['eval_seed']}); training seeds {list(plan['seeds'])}; {done} of {len(units)} units done.",
+        "Definitions: docs/transfer.md.  A > 1: fine-tuning from the row's checkpoint learns the column's task "
+        "faster than from scratch.",
+        "",
+        "## Advantage A(row -> column), mean over seeds [95% interval over seeds]",
+        "",
+        matrix.markdown(),
+        "",
+        f"## AUC of training from scratch (floor {meta['auc_floor']:.3f})",
+        "",
+        "| task | " + " | ".join(f"seed {s}" for s in plan["seeds"]) + " |",
+        "|---|" + "---|" * len(plan["seeds"]),
+    ]
     for d in matrix.tasks:
         cells = [meta["scratch_auc"][d].get(str(s)) for s in plan["seeds"]]
         lines.append(f"| {d} | " + " | ".join("n/a" if c is None else f"{c:.3f}" for c in cells) + " |")
-    lines += ["", "## Offline proxy: Q-ranking AUC of the row's checkpoint on the column's data", "",
-              "| from \\ to | " + " | ".join(matrix.tasks) + " |", "|" + "---|" * (len(matrix.tasks) + 1)]
+    lines += [
+        "",
+        "## Offline proxy: Q-ranking AUC of the row's checkpoint on the column's data",
+        "",
+        "| from \\ to | " + " | ".join(matrix.tasks) + " |",
+        "|" + "---|" * (len(matrix.tasks) + 1),
+    ]
     for s_ in matrix.tasks:
-        cells = ["-" if s_ == d else "n/a" if not (meta["proxy"][s_].get(d) or {}).get("auc") else
-                 f"{meta['proxy'][s_][d]['auc']:.3f}" for d in matrix.tasks]
+        cells = [
+            "-"
+            if s_ == d
+            else "n/a"
+            if not (meta["proxy"][s_].get(d) or {}).get("auc")
+            else f"{meta['proxy'][s_][d]['auc']:.3f}"
+            for d in matrix.tasks
+        ]
         lines.append(f"| {s_} | " + " | ".join(cells) + " |")
     lines += ["", "Rank correlation of the proxy with the measured advantage, over (source, target) pairs:", ""]
     for k, c in meta["rank_correlation"].items():
@@ -264,11 +301,17 @@ def write_transfer_report(name: str) -> dict[str, Any]:
     text = _render(matrix, read_status(folder / STATUS_FILE), figure, curriculum)
     workspace.atomic_write_bytes(folder / MATRIX_MD, (text + "\n").encode())
     measured = sum(v is not None for v in matrix.advantage.values())
-    return {"matrix": folder / MATRIX_JSON, "report": folder / MATRIX_MD, "measured": measured,
-            "pairs": len(matrix.advantage), "rank_correlation": matrix.meta["rank_correlation"]}
+    return {
+        "matrix": folder / MATRIX_JSON,
+        "report": folder / MATRIX_MD,
+        "measured": measured,
+        "pairs": len(matrix.advantage),
+        "rank_correlation": matrix.meta["rank_correlation"],
+    }
 
 
 # --- following the curricula ----------------------------------------------------------------------------------------
+
 
 def _final_success(plan: TransferPlan, tag: str) -> float | None:
     from nsl.eval import CURVE_FILE, read_curve
@@ -289,26 +332,33 @@ def prepare_curricula(name: str, seeds: tuple[int, ...] | None = None):
     matrix = measure_matrix(plan)
     missing = sum(v is None for v in matrix.advantage.values())
     if missing:
-        raise ConfigError(f"transfer {name!r} has {missing} unmeasured pairs; finish `nsl transfer run` first "
-                          "(the curricula come from the complete matrix)")
+        raise ConfigError(
+            f"transfer {name!r} has {missing} unmeasured pairs; finish `nsl transfer run` first "
+            "(the curricula come from the complete matrix)"
+        )
     seeds = tuple(seeds) if seeds else default_seeds(plan)
     overlap = sorted(set(seeds) & set(plan.seeds))
     if overlap:
-        raise ConfigError(f"--seed {','.join(map(str, seeds))} repeats the matrix's own seeds {overlap}; following a "
-                          "curriculum with them would rerun the matrix's runs, so choose others")
+        raise ConfigError(
+            f"--seed {','.join(map(str, seeds))} repeats the matrix's own seeds {overlap}; following a "
+            "curriculum with them would rerun the matrix's runs, so choose others"
+        )
     curriculum = build_curriculum(matrix)
     cplan = CurriculaPlan(name, seeds, {t: dict(getattr(curriculum, t).parent) for t in TREES})
     saved = folder(name) / PLAN_FILE
     if saved.is_file() and json.loads(saved.read_text()) != json.loads(json.dumps(cplan.to_dict())):
-        raise ConfigError(f"the curricula of transfer {name!r} were started with other trees or seeds ({saved}); "
-                          "use the same --seed to resume")
+        raise ConfigError(
+            f"the curricula of transfer {name!r} were started with other trees or seeds ({saved}); "
+            "use the same --seed to resume"
+        )
     study = _study_plan(plan)
     units = build_curricula_units(plan, cplan, study.base, actions.base_sources(study), _ft_lr(study.base))
     return plan, cplan, units, unit_graph(units)
 
 
-def run_curricula(name: str, seeds: tuple[int, ...] | None = None, workers: int = 1,
-                  progress: bool = True) -> tuple[dict[str, Any], dict[str, Any]]:
+def run_curricula(
+    name: str, seeds: tuple[int, ...] | None = None, workers: int = 1, progress: bool = True
+) -> tuple[dict[str, Any], dict[str, Any]]:
     """Follow the optimal and pessimal curricula of transfer ``name`` for real (resumable), then report."""
     from .curricula import folder
 
@@ -329,8 +379,9 @@ def write_curricula_report(name: str) -> dict[str, Any]:
         raise UnknownReferenceError(f"transfer {name!r} has no curricula yet; run `nsl transfer curricula {name}`")
     saved = json.loads(path.read_text())
     cplan = CurriculaPlan(saved["transfer"], tuple(saved["seeds"]), saved["trees"], str(path))
-    result = measure(plan, cplan, measure_matrix(plan), lambda tag: _curve_auc(plan, tag),
-                     lambda tag: _final_success(plan, tag))
+    result = measure(
+        plan, cplan, measure_matrix(plan), lambda tag: _curve_auc(plan, tag), lambda tag: _final_success(plan, tag)
+    )
     workspace.atomic_write_json(folder(name) / RESULT_JSON, result)
     workspace.atomic_write_bytes(folder(name) / RESULT_MD, (render(result, name) + "\n").encode())
     return {"result": folder(name) / RESULT_JSON, "report": folder(name) / RESULT_MD, **result}

@@ -71,8 +71,11 @@ def train_tag(method: str, shift: str, episodes: int, steps: int, seed: int, pre
 
 def base_data_units(base: list[BaseSource]) -> list[Unit]:
     """A collect unit for each base dataset with a recipe (done at once when the workspace holds it)."""
-    return [Unit(f"base-data:{b.dataset}", "collect", {"dataset": b.dataset, "expect_hash": b.hash, **b.recipe})
-            for b in base if b.recipe is not None]
+    return [
+        Unit(f"base-data:{b.dataset}", "collect", {"dataset": b.dataset, "expect_hash": b.hash, **b.recipe})
+        for b in base
+        if b.recipe is not None
+    ]
 
 
 def base_mix(base: list[BaseSource]) -> list[dict[str, Any]]:
@@ -91,8 +94,10 @@ class _Builder:
     def _add(self, unit: Unit) -> str:
         old = self.units.get(unit.name)
         if old is not None and (dict(old.params), old.deps) != (dict(unit.params), unit.deps):
-            raise ConfigError(f"two experiments of the plan need unit {unit.name} with different settings; "
-                              "this is a bug in the unit graph, please report it")
+            raise ConfigError(
+                f"two experiments of the plan need unit {unit.name} with different settings; "
+                "this is a bug in the unit graph, please report it"
+            )
         self.units[unit.name] = unit
         return unit.name
 
@@ -104,44 +109,101 @@ class _Builder:
     def collect(self, shift: str, policy: str, episodes: int) -> str:
         c = self.plan.collect
         deps = () if policy == BASE_POLICY else (f"train:{policy}",)
-        return self._add(Unit(f"collect:{shift}:{policy}", "collect", {
-            "dataset": f"{self.study}-{slug(shift)}-by-{slug(policy)}", "shift": shift, "policy": policy,
-            "policy_ref": self.ref(policy),
-            "episodes": episodes, "seed": c.seed, "epsilon": c.epsilon, "batch": c.batch}, deps))
+        return self._add(
+            Unit(
+                f"collect:{shift}:{policy}",
+                "collect",
+                {
+                    "dataset": f"{self.study}-{slug(shift)}-by-{slug(policy)}",
+                    "shift": shift,
+                    "policy": policy,
+                    "policy_ref": self.ref(policy),
+                    "episodes": episodes,
+                    "seed": c.seed,
+                    "epsilon": c.epsilon,
+                    "batch": c.batch,
+                },
+                deps,
+            )
+        )
 
     def target_data(self, shift: str, episodes: int, policy: str = BASE_POLICY) -> tuple[str, int]:
         """(collect unit, tier) for the first ``episodes`` episodes the policy collects in the shift."""
         size = self.plan.collect.episodes if policy == BASE_POLICY else episodes
         return self.collect(shift, policy, size), episodes
 
-    def train(self, tag: str, shift: str, data: tuple[str, int], *, method: str, init: str | None, steps: int,
-              seed: int, monitor: Mapping[str, Any] | None = None, mixed: bool = True) -> str:
+    def train(
+        self,
+        tag: str,
+        shift: str,
+        data: tuple[str, int],
+        *,
+        method: str,
+        init: str | None,
+        steps: int,
+        seed: int,
+        monitor: Mapping[str, Any] | None = None,
+        mixed: bool = True,
+    ) -> str:
         collect_unit, tier = data
         deps = [collect_unit, *self.base_deps]
         if init is not None and init != BASE_POLICY:
             deps.append(f"train:{init}")
         mix = base_mix(self.base) if mixed else []
-        target = {"collect": collect_unit, "dataset": self.units[collect_unit].params["dataset"], "tier": tier,
-                  "weight": 0.5 if mixed else 1.0}
-        return self._add(Unit(f"train:{tag}", "train", {
-            "checkpoint": f"{self.study}-{tag}", "shift": shift, "method": method, "init": init,
-            "init_ref": None if init is None else self.ref(init), "steps": steps,
-            "seed": seed, "base": mix, "target": target, "checkpoint_every": self.plan.checkpoint_every,
-            "monitor": None if monitor is None else dict(monitor)}, tuple(deps)))
+        target = {
+            "collect": collect_unit,
+            "dataset": self.units[collect_unit].params["dataset"],
+            "tier": tier,
+            "weight": 0.5 if mixed else 1.0,
+        }
+        return self._add(
+            Unit(
+                f"train:{tag}",
+                "train",
+                {
+                    "checkpoint": f"{self.study}-{tag}",
+                    "shift": shift,
+                    "method": method,
+                    "init": init,
+                    "init_ref": None if init is None else self.ref(init),
+                    "steps": steps,
+                    "seed": seed,
+                    "base": mix,
+                    "target": target,
+                    "checkpoint_every": self.plan.checkpoint_every,
+                    "monitor": None if monitor is None else dict(monitor),
+                },
+                tuple(deps),
+            )
+        )
 
     def evaluate(self, policy: str, shift: str) -> str:
         e = self.plan.eval
         deps = () if policy == BASE_POLICY else (f"train:{policy}",)
-        return self._add(Unit(f"eval:{policy}:{shift}", "eval", {
-            "policy": policy, "checkpoint_ref": self.ref(policy), "shift": shift, "episodes": e.episodes,
-            "seed": e.seed}, deps))
+        return self._add(
+            Unit(
+                f"eval:{policy}:{shift}",
+                "eval",
+                {
+                    "policy": policy,
+                    "checkpoint_ref": self.ref(policy),
+                    "shift": shift,
+                    "episodes": e.episodes,
+                    "seed": e.seed,
+                },
+                deps,
+            )
+        )
 
     # -- experiments ---------------------------------------------------------------------------------------------
     def build(self) -> dict[str, Unit]:
         p = self.plan
         challenge = ["base", *p.shifts]
-        extra = [*(p.continual.sequence if p.continual else ()), *([p.curves.shift] if p.curves else ()),
-                 *([p.early_stop.shift] if p.early_stop else ())]
+        extra = [
+            *(p.continual.sequence if p.continual else ()),
+            *([p.curves.shift] if p.curves else ()),
+            *([p.early_stop.shift] if p.early_stop else ()),
+        ]
         for s in [*challenge, *[s for s in extra if s not in challenge]]:
             self.evaluate(BASE_POLICY, s)  # Table 5.1, tier 0 of Table 5.2, stage 0 of Table 5.3
         f = p.finetune
@@ -150,14 +212,22 @@ class _Builder:
             for seed in f.seeds:
                 for k in f.tiers:
                     tag = train_tag("ft", shift, k, f.steps, seed)
-                    self.train(tag, shift, self.target_data(shift, k), method="ft", init=BASE_POLICY,
-                               steps=f.steps, seed=seed)
+                    self.train(
+                        tag, shift, self.target_data(shift, k), method="ft", init=BASE_POLICY, steps=f.steps, seed=seed
+                    )
                     self.evaluate(tag, shift)
                     self.evaluate(tag, "base")
                 for method in f.baselines:
                     tag = train_tag(method, shift, top, f.steps, seed)
-                    self.train(tag, shift, self.target_data(shift, top), method=method, init=BASE_POLICY,
-                               steps=f.steps, seed=seed)
+                    self.train(
+                        tag,
+                        shift,
+                        self.target_data(shift, top),
+                        method=method,
+                        init=BASE_POLICY,
+                        steps=f.steps,
+                        seed=seed,
+                    )
                     self.evaluate(tag, shift)
                     self.evaluate(tag, "base")
         if p.continual is not None:
@@ -167,17 +237,41 @@ class _Builder:
             for method in cv.methods:
                 for seed in cv.seeds:
                     tag = train_tag(method, cv.shift, cv.episodes, cv.steps, seed, prefix=f"curve-{method}")
-                    self.train(tag, cv.shift, self.target_data(cv.shift, cv.episodes), method=method,
-                               init=BASE_POLICY, steps=cv.steps, seed=seed,
-                               monitor={"every": cv.every, "episodes": cv.eval_episodes,
-                                        "base_episodes": cv.eval_episodes, "seed": p.eval.seed, "holdout": None})
+                    self.train(
+                        tag,
+                        cv.shift,
+                        self.target_data(cv.shift, cv.episodes),
+                        method=method,
+                        init=BASE_POLICY,
+                        steps=cv.steps,
+                        seed=seed,
+                        monitor={
+                            "every": cv.every,
+                            "episodes": cv.eval_episodes,
+                            "base_episodes": cv.eval_episodes,
+                            "seed": p.eval.seed,
+                            "holdout": None,
+                        },
+                    )
         if p.early_stop is not None:
             es = p.early_stop
             tag = train_tag("ft", es.shift, es.episodes, es.steps, es.seed, prefix="es")
-            self.train(tag, es.shift, self.target_data(es.shift, es.episodes), method="ft", init=BASE_POLICY,
-                       steps=es.steps, seed=es.seed,
-                       monitor={"every": es.every, "episodes": es.eval_episodes, "base_episodes": es.eval_episodes,
-                                "seed": p.eval.seed, "holdout": es.holdout})
+            self.train(
+                tag,
+                es.shift,
+                self.target_data(es.shift, es.episodes),
+                method="ft",
+                init=BASE_POLICY,
+                steps=es.steps,
+                seed=es.seed,
+                monitor={
+                    "every": es.every,
+                    "episodes": es.eval_episodes,
+                    "base_episodes": es.eval_episodes,
+                    "seed": p.eval.seed,
+                    "holdout": es.holdout,
+                },
+            )
         return self.units
 
     def _continual(self) -> None:
@@ -192,8 +286,15 @@ class _Builder:
                 self.evaluate(tag, t)
             # single-step comparison: fine-tune the base on the base policy's episodes of this shift
             single = train_tag("ft", shift, s.episodes, s.steps, s.seed)
-            self.train(single, shift, self.target_data(shift, s.episodes), method="ft", init=BASE_POLICY,
-                       steps=s.steps, seed=s.seed)
+            self.train(
+                single,
+                shift,
+                self.target_data(shift, s.episodes),
+                method="ft",
+                init=BASE_POLICY,
+                steps=s.steps,
+                seed=s.seed,
+            )
             self.evaluate(single, shift)
             policy = tag
 
@@ -203,8 +304,10 @@ def continual_tags(plan: Plan) -> list[str]:
     s = plan.continual
     if s is None:
         return []
-    return [train_tag("ft", shift, s.episodes, s.steps, s.seed, prefix=None if i == 1 else f"c{i}")
-            for i, shift in enumerate(s.sequence, 1)]
+    return [
+        train_tag("ft", shift, s.episodes, s.steps, s.seed, prefix=None if i == 1 else f"c{i}")
+        for i, shift in enumerate(s.sequence, 1)
+    ]
 
 
 def build_units(plan: Plan, study: str, base: list[BaseSource]) -> dict[str, Unit]:

@@ -24,7 +24,10 @@ def run_cli(*argv: str) -> int:
 
 
 def recorded_calls(script, tmp_path, *args: str, **env: str) -> list[list[str]]:
-    """Run a shell recipe (with ``args``) and a recording stand-in for `nsl` (``$NSL``): the argument lists it would run."""
+    """Run a shell recipe (with ``args``) and a recording stand-in for `nsl` (``$NSL``).
+
+    Returns the argument lists it would run.
+    """
     import shlex
     import subprocess
 
@@ -35,4 +38,3 @@ def recorded_calls(script, tmp_path, *args: str, **env: str) -> list[list[str]]:
     env = {**os.environ, "NSL": str(fake), "NSL_HOME": str(tmp_path / "home"), **env}
     subprocess.run(["bash", str(script), *args], env=env, check=True, capture_output=True)
     return [shlex.split(line) for line in log.read_text().splitlines()]
-

@@ -26,9 +26,18 @@ print(json.dumps({"code": code, "modules": sorted(sys.modules)}))
 """
 
 
-@pytest.mark.parametrize("argv", [["--help"], ["catalog", "ls"], ["dataset", "ls"], ["train", "--help"],
-                                  ["bench", "learner", "--help"], ["transfer", "run", "--help"],
-                                  ["curriculum", "--help"]])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--help"],
+        ["catalog", "ls"],
+        ["dataset", "ls"],
+        ["train", "--help"],
+        ["bench", "learner", "--help"],
+        ["transfer", "run", "--help"],
+        ["curriculum", "--help"],
+    ],
+)
 def test_light_commands_do_not_import_heavy_libraries(argv, tmp_path):
     env = {**os.environ, "NSL_HOME": str(tmp_path / "home")}
     out = subprocess.run([sys.executable, "-c", DRIVER, *argv], capture_output=True, text=True, env=env, timeout=120)

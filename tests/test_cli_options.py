@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import inspect
 
 import pytest
 
@@ -12,11 +11,32 @@ from nsl.commands import train
 from nsl.commands._options import rename_old_options
 
 # dest -> the one option string that may carry it
-CANONICAL = {"batch_size": "--batch-size", "workers": "--workers", "seed": "--seed", "json": "--json",
-             "data": "--data", "checkpoint": "--checkpoint", "init": "--init"}
+CANONICAL = {
+    "batch_size": "--batch-size",
+    "workers": "--workers",
+    "seed": "--seed",
+    "json": "--json",
+    "data": "--data",
+    "checkpoint": "--checkpoint",
+    "init": "--init",
+}
 # spellings of those ideas that must not come back as visible options
-FORBIDDEN = {"--batch", "--bs", "--num-workers", "--jobs", "-j", "--procs", "--random-seed", "--dataset",
-             "--datasets", "--ckpt", "--model", "--parent", "--json-lines", "--jsonl"}
+FORBIDDEN = {
+    "--batch",
+    "--bs",
+    "--num-workers",
+    "--jobs",
+    "-j",
+    "--procs",
+    "--random-seed",
+    "--dataset",
+    "--datasets",
+    "--ckpt",
+    "--model",
+    "--parent",
+    "--json-lines",
+    "--jsonl",
+}
 # ideas whose destination must use the canonical word
 WORDS = {"batch": "batch_size", "worker": "workers", "seed": "seed", "json": "json"}
 CLOSED = {"split": {"train", "test"}, "criterion": {"eval", "softopc", "auc", "td"}}
@@ -34,15 +54,27 @@ PARSERS = list(_walk(build_parser()))
 
 
 def _visible(parser):
-    return [a for a in parser._actions
-            if not isinstance(a, (argparse._HelpAction, argparse._SubParsersAction, argparse._VersionAction))
-            and a.help != argparse.SUPPRESS]
+    return [
+        a
+        for a in parser._actions
+        if not isinstance(a, (argparse._HelpAction, argparse._SubParsersAction, argparse._VersionAction))
+        and a.help != argparse.SUPPRESS
+    ]
 
 
 def test_the_walk_reaches_every_command():
     names = {" ".join(p) for p, _ in PARSERS}
-    assert {"collect", "train", "eval", "continual", "render", "report", "dataset ls", "catalog ls",
-            "bench learner"} <= names
+    assert {
+        "collect",
+        "train",
+        "eval",
+        "continual",
+        "render",
+        "report",
+        "dataset ls",
+        "catalog ls",
+        "bench learner",
+    } <= names
 
 
 @pytest.mark.parametrize("path, parser", PARSERS, ids=[" ".join(p) or "nsl" for p, _ in PARSERS])
@@ -95,8 +127,9 @@ def test_no_option_default_disagrees_with_its_config(path, parser):
         if a.required or isinstance(a, argparse._AppendAction):
             assert a.default is None, f"{label}: a required or repeated option has no default of its own"
         else:
-            assert f.default is not MISSING and a.default == f.default, \
+            assert f.default is not MISSING and a.default == f.default, (
                 f"{label} defaults to {a.default!r}, {config.__name__}.{f.name} to {f.default!r}"
+            )
         assert a.help.replace("%%", "%") == f.metadata["help"], f"{label}: help differs from {config.__name__}'s"
     assert checked >= len(by_name) - 1, f"nsl {' '.join(path)} fills few fields of {config.__name__}"
 
@@ -125,8 +158,11 @@ def test_the_scene_seeds_are_named_and_distinct():
 
 def test_renamed_options_still_work_and_say_the_new_name(capsys):
     parser = build_parser()
-    args = parser.parse_args(rename_old_options(["collect", "--shift", "base", "--episodes", "2", "--policy",
-                                                 "random", "--dataset", "d", "--batch=4"]))
+    args = parser.parse_args(
+        rename_old_options(
+            ["collect", "--shift", "base", "--episodes", "2", "--policy", "random", "--dataset", "d", "--batch=4"]
+        )
+    )
     assert args.data == "d" and args.batch_size == 4
     err = capsys.readouterr().err
     assert "--dataset is now --data" in err and "--batch is now --batch-size" in err

@@ -13,25 +13,31 @@ from nsl.errors import ConfigError, CorruptDataError
 from nsl.refs import DataRef, parse_data_ref
 
 
-@pytest.mark.parametrize("text, expected", [
-    ("grasp", DataRef("grasp")),
-    ("data:grasp@v2", DataRef("grasp", 2)),
-    ("grasp-base@v1:800", DataRef("grasp-base", 1, 800)),
-    ("data:grasp:25", DataRef("grasp", None, 25)),
-])
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        ("grasp", DataRef("grasp")),
+        ("data:grasp@v2", DataRef("grasp", 2)),
+        ("grasp-base@v1:800", DataRef("grasp-base", 1, 800)),
+        ("data:grasp:25", DataRef("grasp", None, 25)),
+    ],
+)
 def test_datasets_and_catalog_read_references_alike(text, expected):
     assert parse_data_ref(text) == api.parse_ref(text) == expected
     assert isinstance(expected.tier, (int, type(None)))
 
 
-@pytest.mark.parametrize("text, message", [
-    ("grasp@2", r"malformed: version '2'; write it as @vN"),
-    ("grasp@v0", "malformed: version 'v0'"),
-    ("grasp@v1:abc", "tier 'abc' is not a number of episodes"),
-    ("grasp@v1:0", "tier '0' must be at least 1 episode"),
-    ("ckpt:base", "is a checkpoint reference"),
-    ("bad name", "dataset name 'bad name' is not valid"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("grasp@2", r"malformed: version '2'; write it as @vN"),
+        ("grasp@v0", "malformed: version 'v0'"),
+        ("grasp@v1:abc", "tier 'abc' is not a number of episodes"),
+        ("grasp@v1:0", "tier '0' must be at least 1 episode"),
+        ("ckpt:base", "is a checkpoint reference"),
+        ("bad name", "dataset name 'bad name' is not valid"),
+    ],
+)
 def test_bad_references_are_refused_with_one_line(text, message):
     with pytest.raises(ConfigError, match=message):
         parse_data_ref(text)

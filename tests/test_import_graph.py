@@ -26,8 +26,9 @@ ROOT = Path(__file__).resolve().parents[1]
 FOLDERS = ("collectors", "datasets", "learners", "eval", "catalog")
 ALLOWED_FOLDERS = {"eval": {"collectors"}}
 CLI = ("nsl.cli", "nsl.__main__", "nsl.commands", "nsl.bench")
-CORE = sorted(f"nsl.{p.stem}" for p in (ROOT / "nsl").glob("*.py")
-              if p.stem not in ("__init__", "__main__", "cli", "api"))
+CORE = sorted(
+    f"nsl.{p.stem}" for p in (ROOT / "nsl").glob("*.py") if p.stem not in ("__init__", "__main__", "cli", "api")
+)
 _FIVE = {f"nsl.{f}" for f in FOLDERS}
 # package -> the nsl packages it may import besides the core and itself
 LAYERS = {
@@ -104,15 +105,21 @@ def test_each_layer_imports_only_what_is_below_it(package, module, path):
 
 def test_every_layer_is_checked():
     found = {m for _, m, _ in LAYER_MODULES}
-    assert {"nsl.curriculum.tree", "nsl.services.train", "nsl.study.actions", "nsl.share.transfer",
-            "nsl.cluster.executor"} <= found
+    assert {
+        "nsl.curriculum.tree",
+        "nsl.services.train",
+        "nsl.study.actions",
+        "nsl.share.transfer",
+        "nsl.cluster.executor",
+    } <= found
     assert all((ROOT / f).is_dir() for f in LAYERS)
 
 
 def test_the_api_imports_no_command_line():
     path = ROOT / "nsl" / "api.py"
-    bad = sorted(t for t in _nsl_targets(_imports("nsl.api", path))
-                 if t not in _core_names() | API_ALLOWED | {"nsl.api"})
+    bad = sorted(
+        t for t in _nsl_targets(_imports("nsl.api", path)) if t not in _core_names() | API_ALLOWED | {"nsl.api"}
+    )
     assert not bad, f"nsl/api.py imports {bad}; the API sits below the command line"
 
 

@@ -28,9 +28,11 @@ def _run(code: str, cwd: Path) -> str:
 
 
 def test_imports_from_repo_root_and_elsewhere(tmp_path):
-    code = ("import sys; sys.path.insert(0, '');"
-            "import datasets, lerobot.datasets.lerobot_dataset, nsl.collectors, nsl.datasets, nsl.eval;"
-            "print(datasets.__file__); print(nsl.collectors.__file__)")
+    code = (
+        "import sys; sys.path.insert(0, '');"
+        "import datasets, lerobot.datasets.lerobot_dataset, nsl.collectors, nsl.datasets, nsl.eval;"
+        "print(datasets.__file__); print(nsl.collectors.__file__)"
+    )
     for cwd in (ROOT, tmp_path):
         hf, collectors = _run(code, cwd).splitlines()
         assert "site-packages" in hf, f"Hugging Face datasets shadowed from {cwd}: {hf}"
@@ -38,8 +40,23 @@ def test_imports_from_repo_root_and_elsewhere(tmp_path):
 
 
 def test_wheel_contains_the_five_subpackages(tmp_path):
-    out = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
-                          "-w", str(tmp_path), str(ROOT)], capture_output=True, text=True, timeout=300)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "--no-build-isolation",
+            "-q",
+            "-w",
+            str(tmp_path),
+            str(ROOT),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert out.returncode == 0, out.stderr
     wheel = next(tmp_path.glob("nsl-*.whl"))
     names = set(zipfile.ZipFile(wheel).namelist())

@@ -18,8 +18,18 @@ import networkx as nx
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("share", "cluster", "study", "curriculum", "collectors", "datasets", "learners", "eval", "catalog",
-            "services")
+PACKAGES = (
+    "share",
+    "cluster",
+    "study",
+    "curriculum",
+    "collectors",
+    "datasets",
+    "learners",
+    "eval",
+    "catalog",
+    "services",
+)
 CORE = tuple(sorted(p.stem for p in (ROOT / "nsl").glob("*.py") if p.stem not in ("__init__", "__main__", "cli")))
 
 

@@ -33,8 +33,10 @@ def test_the_documented_example_runs_end_to_end(tmp_path, monkeypatch):
 
 
 def test_import_nsl_is_cheap_and_lists_the_api():
-    code = ("import sys, nsl; heavy = [m for m in ('torch', 'mujoco', 'numpy', 'nsl.api') if m in sys.modules]; "
-            "print(heavy); print(sorted(n for n in dir(nsl) if n in ('collect', 'train', 'evaluate')))")
+    code = (
+        "import sys, nsl; heavy = [m for m in ('torch', 'mujoco', 'numpy', 'nsl.api') if m in sys.modules]; "
+        "print(heavy); print(sorted(n for n in dir(nsl) if n in ('collect', 'train', 'evaluate')))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
     assert out.stdout.splitlines() == ["[]", "['collect', 'evaluate', 'train']"]
 

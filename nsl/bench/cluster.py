@@ -34,10 +34,17 @@ def add_arguments(p) -> None:
     p.add_argument("--episodes", type=int, default=None, help="episodes per measurement (default 600, quick 150)")
     p.add_argument("--cpus", type=int, default=2, help="local workers and Ray CPUs (default 2)")
     p.add_argument("--batch-size", type=int, default=1, help="environments per chunk, as nsl collect --batch-size")
-    p.add_argument("--rounds", type=int, default=None,
-                   help="local and Ray runs, alternated; the best of each counts (default 3, quick 1)")
-    p.add_argument("--policy", default="oracle:0.3",
-                   help="oracle[:NOISE] (default oracle:0.3) or base (the shipped checkpoint's CEM policy)")
+    p.add_argument(
+        "--rounds",
+        type=int,
+        default=None,
+        help="local and Ray runs, alternated; the best of each counts (default 3, quick 1)",
+    )
+    p.add_argument(
+        "--policy",
+        default="oracle:0.3",
+        help="oracle[:NOISE] (default oracle:0.3) or base (the shipped checkpoint's CEM policy)",
+    )
 
 
 def _policy(ref: str):
@@ -64,8 +71,9 @@ def _collect(make_policy, n: int, cpus: int, batch: int, runner=None) -> tuple[l
 
     episodes, first = [], 0.0
     t0 = time.perf_counter()
-    for ep in collect_episodes(EnvConfig(image_size=64), make_policy, range(n), seed=0, workers=cpus, batch=batch,
-                               runner=runner):
+    for ep in collect_episodes(
+        EnvConfig(image_size=64), make_policy, range(n), seed=0, workers=cpus, batch=batch, runner=runner
+    ):
         episodes.append(ep)
         first = first or time.perf_counter()
     end = time.perf_counter()
@@ -76,8 +84,13 @@ def _same(a: list, b: list) -> bool:
     import numpy as np
 
     return len(a) == len(b) and all(
-        x.index == y.index and x.success == y.success and np.array_equal(x.images, y.images)
-        and np.array_equal(x.actions, y.actions) and np.array_equal(x.rewards, y.rewards) for x, y in zip(a, b))
+        x.index == y.index
+        and x.success == y.success
+        and np.array_equal(x.images, y.images)
+        and np.array_equal(x.actions, y.actions)
+        and np.array_equal(x.rewards, y.rewards)
+        for x, y in zip(a, b)
+    )
 
 
 def run(args) -> dict:
@@ -110,10 +123,12 @@ def run(args) -> dict:
         executor.close()
     (t_local, steady_local), (t_ray, steady_ray) = min(local_runs), min(ray_runs)  # best round of each
     frames = sum(e.length for e in local)
-    print(f"collected {n} episodes ({frames} frames) {rounds} times each: best {t_local:.1f} s on {args.cpus} local "
-          f"workers (all: {', '.join(f'{t:.1f}' for t, _ in local_runs)}), best {t_ray:.1f} s on Ray with "
-          f"{args.cpus} CPUs (all: {', '.join(f'{t:.1f}' for t, _ in ray_runs)}; ray.init {t_init:.1f} s)",
-          file=sys.stderr)
+    print(
+        f"collected {n} episodes ({frames} frames) {rounds} times each: best {t_local:.1f} s on {args.cpus} local "
+        f"workers (all: {', '.join(f'{t:.1f}' for t, _ in local_runs)}), best {t_ray:.1f} s on Ray with "
+        f"{args.cpus} CPUs (all: {', '.join(f'{t:.1f}' for t, _ in ray_runs)}; ray.init {t_init:.1f} s)",
+        file=sys.stderr,
+    )
     return {
         "local_episodes_per_s": round(n / t_local, 2),
         "ray_episodes_per_s": round(n / t_ray, 2),
@@ -127,6 +142,12 @@ def run(args) -> dict:
         "same_episodes": _same(local, on_ray),
         "bytes_per_episode": int(sum(sizes) / len(sizes)),
         "frames_per_episode": round(frames / n, 2),
-        "episodes": n, "rounds": len(local_runs), "batch": args.batch_size, "policy": args.policy, "cpus": args.cpus,
-        "ray": info["ray"], "cpu_count": os.cpu_count(), "load_average_1min": round(os.getloadavg()[0], 2),
+        "episodes": n,
+        "rounds": len(local_runs),
+        "batch": args.batch_size,
+        "policy": args.policy,
+        "cpus": args.cpus,
+        "ray": info["ray"],
+        "cpu_count": os.cpu_count(),
+        "load_average_1min": round(os.getloadavg()[0], 2),
     }

@@ -27,10 +27,18 @@ HELP = "dataset writer/loader frames/s vs LeRobot and 2-worker collection speed-
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--episodes", type=int, default=None,
-                   help="episodes collected for the speed-up and the data (default 480, quick 200)")
-    p.add_argument("--lerobot-episodes", type=int, default=None,
-                   help="episodes written with LeRobot's writer (default 200, quick 60)")
+    p.add_argument(
+        "--episodes",
+        type=int,
+        default=None,
+        help="episodes collected for the speed-up and the data (default 480, quick 200)",
+    )
+    p.add_argument(
+        "--lerobot-episodes",
+        type=int,
+        default=None,
+        help="episodes written with LeRobot's writer (default 200, quick 60)",
+    )
     p.add_argument("--seconds", type=float, default=None, help="time per loader measurement (default 3, quick 1.5)")
 
 
@@ -57,20 +65,29 @@ def _lerobot_write(episodes: list, root: Path):
     from nsl import keys
     from nsl.datasets.api import layout
 
-    features = {k: {**ft, "shape": tuple(ft["shape"])} for k, ft in layout.features(64).items()
-                if k not in layout.INDEX_KEYS and k != keys.TIMESTAMP}
+    features = {
+        k: {**ft, "shape": tuple(ft["shape"])}
+        for k, ft in layout.features(64).items()
+        if k not in layout.INDEX_KEYS and k != keys.TIMESTAMP
+    }
     t0 = time.perf_counter()
     ds = LeRobotDataset.create("bench/lerobot", fps=keys.FPS, features=features, root=root, use_videos=False)
     for ep in episodes:
         t = len(ep.actions)
         for i in range(t):
             last = i == t - 1
-            ds.add_frame({keys.OBS_IMAGE: ep.images[i], keys.OBS_STATE: ep.states[i], keys.ACTION: ep.actions[i],
-                          keys.REWARD: np.array([ep.rewards[i]], np.float32),
-                          keys.DONE: np.array([last and ep.terminated]),
-                          keys.SUCCESS: np.array([last and ep.success]),
-                          keys.TRUNCATED: np.array([last and ep.truncated and not ep.terminated]),
-                          "task": layout.DEFAULT_TASK})
+            ds.add_frame(
+                {
+                    keys.OBS_IMAGE: ep.images[i],
+                    keys.OBS_STATE: ep.states[i],
+                    keys.ACTION: ep.actions[i],
+                    keys.REWARD: np.array([ep.rewards[i]], np.float32),
+                    keys.DONE: np.array([last and ep.terminated]),
+                    keys.SUCCESS: np.array([last and ep.success]),
+                    keys.TRUNCATED: np.array([last and ep.truncated and not ep.terminated]),
+                    "task": layout.DEFAULT_TASK,
+                }
+            )
         ds.save_episode()
     ds.finalize()
     return time.perf_counter() - t0
@@ -111,8 +128,12 @@ def run(args) -> dict:
         from nsl.collectors import scripted_policy
         from nsl.datasets import api
 
-        spec = {"env": {"shift": "base", "image_size": 64}, "policy": scripted_policy("oracle:0.3").describe(),
-                "policy_ref": "oracle:0.3", "seed": 0}
+        spec = {
+            "env": {"shift": "base", "image_size": 64},
+            "policy": scripted_policy("oracle:0.3").describe(),
+            "policy_ref": "oracle:0.3",
+            "seed": 0,
+        }
         frames = sum(len(e.actions) for e in episodes)
         api.write_dataset("warm-up", episodes[:2], spec, 64, 2)  # imports (cv2, pandas), thread pool: untimed
         t0 = time.perf_counter()
@@ -150,8 +171,11 @@ def run(args) -> dict:
         shutil.rmtree(home, ignore_errors=True)
     writer = frames / t_write
     lerobot_writer = sub_frames / t_lerobot_write
-    print(f"collected {n} episodes ({frames} frames) twice: {t1:.1f} s with 1 worker, {t2:.1f} s with 2; "
-          f"{version.ref} {version.hash[:19]}", file=sys.stderr)
+    print(
+        f"collected {n} episodes ({frames} frames) twice: {t1:.1f} s with 1 worker, {t2:.1f} s with 2; "
+        f"{version.ref} {version.hash[:19]}",
+        file=sys.stderr,
+    )
     return {
         "writer_frames_per_s": round(writer, 1),
         "lerobot_writer_frames_per_s": round(lerobot_writer, 1),
@@ -164,6 +188,10 @@ def run(args) -> dict:
         "collect_episodes_per_s_1_worker": round(n / t1, 2),
         "collect_episodes_per_s_2_workers": round(n / t2, 2),
         "loader_open_s": round(t_open, 2),  # first open: hash check + image cache build
-        "episodes": n, "frames": frames, "lerobot_writer_frames": sub_frames, "image_size": 64,
-        "cpu_count": os.cpu_count(), "load_average_1min": round(os.getloadavg()[0], 2),
+        "episodes": n,
+        "frames": frames,
+        "lerobot_writer_frames": sub_frames,
+        "image_size": 64,
+        "cpu_count": os.cpu_count(),
+        "load_average_1min": round(os.getloadavg()[0], 2),
     }

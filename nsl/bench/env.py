@@ -7,7 +7,6 @@ machine state: 64x64 images, 5 objects, random actions, no early termination
 
 from __future__ import annotations
 
-import importlib
 import os
 import sys
 import time
@@ -18,8 +17,12 @@ HELP = "grasp attempts/s of nsl's env vs PyBullet's KukaDiverseObjectEnv (target
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--seconds", type=float, default=None,
-                   help="time budget for the reference env (default 60, quick 25); nsl gets a quarter of it")
+    p.add_argument(
+        "--seconds",
+        type=float,
+        default=None,
+        help="time budget for the reference env (default 60, quick 25); nsl gets a quarter of it",
+    )
 
 
 def load_kuka_diverse_object_env():
@@ -31,8 +34,9 @@ def load_kuka_diverse_object_env():
     modules pointing at the real folders let Python import the module file
     unchanged.
     """
-    import pybullet_data  # noqa: F401  (the package ships pybullet_envs beside it)
     import importlib.util
+
+    import pybullet_data  # noqa: F401  (the package ships pybullet_envs beside it)
 
     spec = importlib.util.find_spec("pybullet")
     site = os.path.dirname(spec.origin)
@@ -50,14 +54,15 @@ def load_kuka_diverse_object_env():
 
             raise EnvironmentSetupError(
                 f"cannot import PyBullet's KukaDiverseObjectEnv ({e}); install the bench extra: "
-                "pip install -e '.[bench]'") from None
+                "pip install -e '.[bench]'"
+            ) from None
     return module.KukaDiverseObjectEnv
 
 
 def _time_reference(seconds: float, seed: int = 0) -> tuple[float, int]:
-    import numpy as np
-
     import contextlib
+
+    import numpy as np
 
     with warnings.catch_warnings(), contextlib.redirect_stdout(sys.stderr):  # it prints to stdout
         warnings.simplefilter("ignore")

@@ -36,8 +36,7 @@ def _rate(make_policy, episodes: int, workers: int) -> tuple[float, float]:
 
     t0 = time.perf_counter()
     first, n = 0.0, 0
-    for _ in collect_episodes(EnvConfig(split="test"), make_policy, range(episodes), seed=7, workers=workers,
-                              batch=8):
+    for _ in collect_episodes(EnvConfig(split="test"), make_policy, range(episodes), seed=7, workers=workers, batch=8):
         n += 1
         if n == 8:
             first = time.perf_counter()
@@ -54,9 +53,14 @@ def run(args) -> dict:
         make_policy = functools.partial(load_policy, str(path))
         one, one_steady = _rate(make_policy, episodes, 1)
         two, two_steady = _rate(make_policy, episodes, 2)
-    return {"episodes": episodes, "eval_episodes_per_s_1_worker": round(one, 2),
-            "eval_episodes_per_s_2_workers": round(two, 2), "speedup_2_workers": round(two / one, 2),
-            "eval_episodes_per_s_1_worker_after_startup": round(one_steady, 2),
-            "eval_episodes_per_s_2_workers_after_startup": round(two_steady, 2),
-            "cem": "64/6/2", "batch_per_worker": 8,
-            "note": "one worker runs in-process with torch's default 2 threads; each of 2 workers uses 1 thread"}
+    return {
+        "episodes": episodes,
+        "eval_episodes_per_s_1_worker": round(one, 2),
+        "eval_episodes_per_s_2_workers": round(two, 2),
+        "speedup_2_workers": round(two / one, 2),
+        "eval_episodes_per_s_1_worker_after_startup": round(one_steady, 2),
+        "eval_episodes_per_s_2_workers_after_startup": round(two_steady, 2),
+        "cem": "64/6/2",
+        "batch_per_worker": 8,
+        "note": "one worker runs in-process with torch's default 2 threads; each of 2 workers uses 1 thread",
+    }

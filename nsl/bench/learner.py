@@ -38,8 +38,9 @@ PEAK_MATMUL = 1024  # square float32 matmul used to measure the machine's peak
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--steps", type=int, default=0, help="timed steps of nsl's update (0 = 60, with --quick 20)")
-    p.add_argument("--baseline-steps", type=int, default=0,
-                   help="timed steps of the plain batched step (0 = 5, with --quick 2)")
+    p.add_argument(
+        "--baseline-steps", type=int, default=0, help="timed steps of the plain batched step (0 = 5, with --quick 2)"
+    )
     p.add_argument("--threads", type=int, default=0, help="torch threads (0 = torch's choice)")
 
 
@@ -51,10 +52,15 @@ def _synthetic_sampler(n: int = 512, seed: int = 0):
     rng = np.random.default_rng(seed)
     images = rng.integers(0, 256, (n, IMAGE, IMAGE, 3), dtype=np.uint8)
     ep = np.arange(n) % 8
-    return ArraySampler(images, rng.random((n, len(keys.STATE_NAMES)), dtype=np.float32),
-                        rng.uniform(-1, 1, (n, len(keys.ACTION_NAMES))).astype(np.float32),
-                        ((ep == 7) & (rng.random(n) < 0.5)).astype(np.float32), (ep == 7).astype(np.float32),
-                        np.minimum(np.arange(n) + 1, n - 1), name="synthetic")
+    return ArraySampler(
+        images,
+        rng.random((n, len(keys.STATE_NAMES)), dtype=np.float32),
+        rng.uniform(-1, 1, (n, len(keys.ACTION_NAMES))).astype(np.float32),
+        ((ep == 7) & (rng.random(n) < 0.5)).astype(np.float32),
+        (ep == 7).astype(np.float32),
+        np.minimum(np.arange(n) + 1, n - 1),
+        name="synthetic",
+    )
 
 
 def _time(step_fn, warmup: int, steps: int) -> float:
@@ -90,7 +96,7 @@ def _peak_gflop_per_s(repeats: int) -> float:
         t = time.perf_counter()
         torch.mm(a, b, out=out)
         best = min(best, time.perf_counter() - t)
-    return 2 * PEAK_MATMUL ** 3 / best / 1e9
+    return 2 * PEAK_MATMUL**3 / best / 1e9
 
 
 def _plain_batched_step(learner, batch, cfg, step: int, reuse_trunk: bool = False) -> None:
@@ -106,8 +112,9 @@ def _plain_batched_step(learner, batch, cfg, step: int, reuse_trunk: bool = Fals
 
     net, polyak, lagged, cem, gen = learner.online, learner.polyak, learner.lagged, cfg.cem, learner.generator
     image = prepare_images(batch[keys.OBS_IMAGE], cfg.augment_crop, cfg.augment_colour, gen, channels_last=False)
-    next_image = prepare_images(batch[keys.NEXT_OBS_IMAGE], cfg.augment_crop, cfg.augment_colour, gen,
-                                channels_last=False)
+    next_image = prepare_images(
+        batch[keys.NEXT_OBS_IMAGE], cfg.augment_crop, cfg.augment_colour, gen, channels_last=False
+    )
     action = batch[keys.ACTION][:, list(net.cfg.action_dims)]
     reward, done, next_state = batch[keys.REWARD], batch[keys.DONE], batch[keys.NEXT_OBS_STATE]
     b, dims, n = len(reward), action.shape[1], cem.samples
@@ -149,11 +156,19 @@ def run(args: argparse.Namespace) -> dict:
     import numpy as np
     import torch
 
+    threads = torch.get_num_threads()
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    try:
+        return _run(args, torch, np)
+    finally:
+        torch.set_num_threads(threads)  # the caller's process keeps its own setting
+
+
+def _run(args: argparse.Namespace, torch, np) -> dict:
     from nsl.learners import Learner, NetConfig, QNetwork, TrainConfig, update
     from nsl.learners.qtopt import batch_to_torch
 
-    if args.threads:
-        torch.set_num_threads(args.threads)
     steps = args.steps or (20 if args.quick else 60)
     base_steps = args.baseline_steps or (2 if args.quick else 5)
     cfg = TrainConfig(batch_size=BATCH, seed=0)
@@ -172,11 +187,15 @@ def run(args: argparse.Namespace) -> dict:
 
     plain = make_learner()
     base_gflop = _gflop(lambda: _plain_batched_step(plain, batches[0], cfg, 0))
-    base_sps = _time(lambda i: _plain_batched_step(plain, batches[i % len(batches)], cfg, i),
-                     warmup=1, steps=base_steps)
+    base_sps = _time(
+        lambda i: _plain_batched_step(plain, batches[i % len(batches)], cfg, i), warmup=1, steps=base_steps
+    )
     reuse = make_learner()
-    reuse_sps = _time(lambda i: _plain_batched_step(reuse, batches[i % len(batches)], cfg, i, reuse_trunk=True),
-                      warmup=1, steps=max(base_steps, 2))
+    reuse_sps = _time(
+        lambda i: _plain_batched_step(reuse, batches[i % len(batches)], cfg, i, reuse_trunk=True),
+        warmup=1,
+        steps=max(base_steps, 2),
+    )
     peak = _peak_gflop_per_s(repeats=5 if args.quick else 20)
     achieved = gflop * ours_sps
     return {

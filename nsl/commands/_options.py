@@ -23,8 +23,14 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefau
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
         default = action.default
-        if ("default" in text or default is None or default is False or default == [] or default == argparse.SUPPRESS
-                or not action.option_strings):
+        if (
+            "default" in text
+            or default is None
+            or default is False
+            or default == []
+            or default == argparse.SUPPRESS
+            or not action.option_strings
+        ):
             return text
         return super()._get_help_string(action)
 
@@ -63,8 +69,12 @@ def add_seed(p, default: int = 0, help: str = "seed") -> None:
 
 
 def add_env_batch_size(p, default: int) -> None:
-    p.add_argument("--batch-size", type=int, default=default,
-                   help="environments per worker stepping in lock-step; the policy acts on them as one batch")
+    p.add_argument(
+        "--batch-size",
+        type=int,
+        default=default,
+        help="environments per worker stepping in lock-step; the policy acts on them as one batch",
+    )
 
 
 def add_field(p, config: type, name: str, *flags: str, **overrides) -> argparse.Action:

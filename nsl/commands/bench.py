@@ -11,8 +11,12 @@ from nsl.commands._options import add_json, add_parser
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = add_parser(sub, "bench", help="run a benchmark (env, data, learner, eval, cluster) and print its figures",
-                   description="Benchmarks compare nsl against a reference measured in the same invocation.")
+    p = add_parser(
+        sub,
+        "bench",
+        help="run a benchmark (env, data, learner, eval, cluster) and print its figures",
+        description="Benchmarks compare nsl against a reference measured in the same invocation.",
+    )
     bsub = p.add_subparsers(dest="bench", metavar="NAME", required=True)
     import nsl.bench as benches
 

@@ -18,15 +18,24 @@ references:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = add_parser(sub, "catalog", help="list, inspect and maintain datasets, checkpoints and evaluations",
-                   description="The catalog ($NSL_HOME/catalog.sqlite) records every dataset version, "
-                               "checkpoint and evaluation, and where each checkpoint came from.",
-                   epilog=EPILOG)
+    p = add_parser(
+        sub,
+        "catalog",
+        help="list, inspect and maintain datasets, checkpoints and evaluations",
+        description="The catalog ($NSL_HOME/catalog.sqlite) records every dataset version, "
+        "checkpoint and evaluation, and where each checkpoint came from.",
+        epilog=EPILOG,
+    )
     cs = p.add_subparsers(dest="catalog_command", metavar="ACTION", required=True)
 
     q = add_parser(cs, "ls", help="list entries")
-    q.add_argument("kind", nargs="?", default="all", choices=["all", "checkpoints", "datasets", "evals", "tags"],
-                   help="what to list (default: all)")
+    q.add_argument(
+        "kind",
+        nargs="?",
+        default="all",
+        choices=["all", "checkpoints", "datasets", "evals", "tags"],
+        help="what to list (default: all)",
+    )
     q.add_argument("--name", help="only entries of this checkpoint or dataset name")
     add_json(q, "the entries")
     q.set_defaults(func=run_ls)
@@ -42,8 +51,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     q.add_argument("--no-evals", action="store_true", help="leave evaluation results out")
     q.set_defaults(func=run_lineage)
 
-    q = add_parser(cs, "tag", help="point a tag at a checkpoint (ckpt:TAG then resolves to it), or remove one",
-                      description="nsl catalog tag ckpt:harsh@best harsh-best  |  nsl catalog tag --delete harsh-best")
+    q = add_parser(
+        cs,
+        "tag",
+        help="point a tag at a checkpoint (ckpt:TAG then resolves to it), or remove one",
+        description="nsl catalog tag ckpt:harsh@best harsh-best  |  nsl catalog tag --delete harsh-best",
+    )
     q.add_argument("ref", nargs="?", help="checkpoint reference")
     q.add_argument("tag", nargs="?", help="tag name (moves the tag if it exists)")
     q.add_argument("-d", "--delete", metavar="TAG", help="remove this tag")
@@ -58,29 +71,42 @@ def register(sub: argparse._SubParsersAction) -> None:
     q = add_parser(cs, "gc", help="delete files no catalog entry references (asks first)")
     q.add_argument("--yes", action="store_true", help="do not ask for confirmation")
     q.add_argument("--dry-run", action="store_true", help="only list what would be removed")
-    q.add_argument("--min-age", type=float, default=3600.0,
-                   help="leave alone anything modified within this many seconds")
+    q.add_argument(
+        "--min-age", type=float, default=3600.0, help="leave alone anything modified within this many seconds"
+    )
     q.set_defaults(func=run_gc)
 
     q = add_parser(cs, "verify", help="re-hash checkpoint and dataset files; report altered ones")
     q.add_argument("refs", nargs="*", help="entries to check (default: all)")
     q.set_defaults(func=run_verify)
 
-    q = add_parser(cs, "suggest-base", help="rank catalogued checkpoints as the base for a new task",
-                   description="By the measured transfer advantage where a transfer matrix has it (the checkpoint "
-                               "of a source task, the new task among its targets), otherwise by an offline proxy "
-                               "that needs no training: how well the checkpoint's Q-function ranks the target "
-                               "episodes' successes above their failures (docs/transfer.md).")
+    q = add_parser(
+        cs,
+        "suggest-base",
+        help="rank catalogued checkpoints as the base for a new task",
+        description="By the measured transfer advantage where a transfer matrix has it (the checkpoint "
+        "of a source task, the new task among its targets), otherwise by an offline proxy "
+        "that needs no training: how well the checkpoint's Q-function ranks the target "
+        "episodes' successes above their failures (docs/transfer.md).",
+    )
     q.add_argument("--shift", required=True, help="the new task: 'base' or a shift spec, e.g. offset_gripper@0.35")
     q.add_argument("--data", required=True, help="its target data, NAME[@vN][:K] (the proxy reads the first episodes)")
     q.add_argument("--episodes", type=int, default=100, help="target episodes the proxy scores each checkpoint on")
-    q.add_argument("--proxy", choices=["auc", "softopc"], default="auc",
-                   help="auc: Q-ranking AUC of success labels; softopc: SoftOPC")
+    q.add_argument(
+        "--proxy",
+        choices=["auc", "softopc"],
+        default="auc",
+        help="auc: Q-ranking AUC of success labels; softopc: SoftOPC",
+    )
     src = q.add_mutually_exclusive_group()
     src.add_argument("--matrix", help="a transfer matrix.json with measured advantages")
     src.add_argument("--transfer", help="a transfer's name: its $NSL_HOME/transfers/NAME/matrix.json")
-    q.add_argument("--checkpoint", action="append", default=[],
-                   help="a candidate (repeat for several; default: the newest checkpoint of every catalogued name)")
+    q.add_argument(
+        "--checkpoint",
+        action="append",
+        default=[],
+        help="a candidate (repeat for several; default: the newest checkpoint of every catalogued name)",
+    )
     add_json(q, "the ranking")
     q.set_defaults(func=run_suggest_base)
 
@@ -118,14 +144,36 @@ def _ckpt_rows(cat, entries) -> list[list[str]]:
     for t, c in cat.tags().items():
         tags.setdefault(c, []).append(t)
     refs = {c.id: c.ref for c in cat.checkpoints()}
-    return [[c.short_id, c.ref, c.shift, refs.get(c.parent, f"{c.parent[:12]} (removed)") if c.parent else "-",
-             _uses(c) or "-", ",".join(tags.get(c.id, [])) or "-", _when(c.created)] for c in entries]
+    return [
+        [
+            c.short_id,
+            c.ref,
+            c.shift,
+            refs.get(c.parent, f"{c.parent[:12]} (removed)") if c.parent else "-",
+            _uses(c) or "-",
+            ",".join(tags.get(c.id, [])) or "-",
+            _when(c.created),
+        ]
+        for c in entries
+    ]
 
 
 def _eval_rows(cat, evals) -> list[list[str]]:
     refs = {c.id: c.ref for c in cat.checkpoints()}
-    return [[str(e.id), refs.get(e.checkpoint, e.checkpoint[:12]), e.shift, e.split, str(e.episodes), _pct(e.rate),
-             f"{_pct(e.ci_low)}-{_pct(e.ci_high)}", str(e.seed), _when(e.created)] for e in evals]
+    return [
+        [
+            str(e.id),
+            refs.get(e.checkpoint, e.checkpoint[:12]),
+            e.shift,
+            e.split,
+            str(e.episodes),
+            _pct(e.rate),
+            f"{_pct(e.ci_low)}-{_pct(e.ci_high)}",
+            str(e.seed),
+            _when(e.created),
+        ]
+        for e in evals
+    ]
 
 
 CKPT_HEAD = ["ID", "CHECKPOINT", "SHIFT", "PARENT", "DATA (x weight)", "TAGS", "CREATED"]
@@ -158,8 +206,10 @@ def run_ls(args: argparse.Namespace) -> int:
         refs = {c.id: c.ref for c in cat.checkpoints()}
         sections = []
         if "datasets" in want:
-            rows = [[f"{d.name}@v{d.version}", d.shift_name, str(d.episodes), short_hash(d.hash), _when(d.created),
-                     d.path] for d in datas]
+            rows = [
+                [f"{d.name}@v{d.version}", d.shift_name, str(d.episodes), short_hash(d.hash), _when(d.created), d.path]
+                for d in datas
+            ]
             sections.append(f"datasets ({len(rows)})\n" + _table(DATA_HEAD, rows))
         if "checkpoints" in want:
             sections.append(f"checkpoints ({len(ckpts)})\n" + _table(CKPT_HEAD, _ckpt_rows(cat, ckpts)))
@@ -181,8 +231,11 @@ def run_show(args: argparse.Namespace) -> int:
             d = r.dataset
             users = cat.trained_on(d.name, d.version)
             if args.json:
-                print(json.dumps({**d.to_dict(), "tier": r.tier, "trained": [c.id for c in users]}, indent=2,
-                                 sort_keys=True))
+                print(
+                    json.dumps(
+                        {**d.to_dict(), "tier": r.tier, "trained": [c.id for c in users]}, indent=2, sort_keys=True
+                    )
+                )
                 return 0
             print(f"dataset    {d.name}@v{d.version}" + (f"  (tier {r.tier})" if r.tier else ""))
             print(f"shift      {d.shift_name}\nepisodes   {d.episodes}\nhash       {d.hash}")
@@ -195,8 +248,18 @@ def run_show(args: argparse.Namespace) -> int:
         kids = cat.children(c.id)
         tags = sorted(cat.tags(c.id))
         if args.json:
-            print(json.dumps({**c.to_dict(), "evaluations": [e.to_dict() for e in evals], "tags": tags,
-                              "children": [k.id for k in kids]}, indent=2, sort_keys=True))
+            print(
+                json.dumps(
+                    {
+                        **c.to_dict(),
+                        "evaluations": [e.to_dict() for e in evals],
+                        "tags": tags,
+                        "children": [k.id for k in kids],
+                    },
+                    indent=2,
+                    sort_keys=True,
+                )
+            )
             return 0
         parent = cat.lineage(c.id)[1:2]
         print(f"checkpoint {c.ref}\nid         {c.id}\nshift      {c.shift}")
@@ -292,33 +355,61 @@ def run_verify(args: argparse.Namespace) -> int:
     for p in report.problems:
         print(p)
     if not report.ok:
-        raise CorruptDataError(f"verify found {len(report.problems)} problem(s) (listed above); restore the files "
-                               "or remove the entries with `nsl catalog rm --force REF`")
+        raise CorruptDataError(
+            f"verify found {len(report.problems)} problem(s) (listed above); restore the files "
+            "or remove the entries with `nsl catalog rm --force REF`"
+        )
     print(f"ok: {report.checkpoints} checkpoint(s) and {report.datasets} dataset(s) match their registration")
     return 0
 
 
 def run_suggest_base(args: argparse.Namespace) -> int:
-    from nsl.services.refs import transfer_matrix
     from nsl.curriculum import Correlation, load_matrix
+    from nsl.services.refs import transfer_matrix
     from nsl.study import suggest_base
 
     matrix = load_matrix(transfer_matrix(args.matrix, args.transfer)) if (args.matrix or args.transfer) else None
-    ranked, data = suggest_base(args.shift, args.data, episodes=args.episodes, matrix=matrix,
-                                checkpoints=args.checkpoint, proxy=args.proxy,
-                                progress=sys.stderr.isatty() and not args.json)
+    ranked, data = suggest_base(
+        args.shift,
+        args.data,
+        episodes=args.episodes,
+        matrix=matrix,
+        checkpoints=args.checkpoint,
+        proxy=args.proxy,
+        progress=sys.stderr.isatty() and not args.json,
+    )
     corr = (matrix.meta.get("rank_correlation") or {}).get(args.proxy) if matrix is not None else None
     if args.json:
-        print(json.dumps({"shift": args.shift, "data": data, "proxy": args.proxy, "rank_correlation": corr,
-                          "candidates": [c.to_dict() for c in ranked]}, indent=2, sort_keys=True))
+        print(
+            json.dumps(
+                {
+                    "shift": args.shift,
+                    "data": data,
+                    "proxy": args.proxy,
+                    "rank_correlation": corr,
+                    "candidates": [c.to_dict() for c in ranked],
+                },
+                indent=2,
+                sort_keys=True,
+            )
+        )
         return 0
-    rows = [[str(i), c.ref, c.shift, c.basis,
-             "-" if c.measured is None else f"{c.measured:.2f}" + (f" [{c.interval[0]:.2f}, {c.interval[1]:.2f}]"
-                                                                    if c.interval else ""),
-             "-" if c.proxy is None else f"{c.proxy:.3f}", c.note] for i, c in enumerate(ranked, 1)]
+    rows = [
+        [
+            str(i),
+            c.ref,
+            c.shift,
+            c.basis,
+            "-"
+            if c.measured is None
+            else f"{c.measured:.2f}" + (f" [{c.interval[0]:.2f}, {c.interval[1]:.2f}]" if c.interval else ""),
+            "-" if c.proxy is None else f"{c.proxy:.3f}",
+            c.note,
+        ]
+        for i, c in enumerate(ranked, 1)
+    ]
     print(f"bases for {args.shift} (proxy: {args.proxy} on {data})")
-    print(_table(["RANK", "CHECKPOINT", "TRAINED FOR", "BY", "ADVANTAGE [95%]", f"PROXY ({args.proxy})", "NOTE"],
-                 rows))
+    print(_table(["RANK", "CHECKPOINT", "TRAINED FOR", "BY", "ADVANTAGE [95%]", f"PROXY ({args.proxy})", "NOTE"], rows))
     if corr is not None:
         print(f"the proxy against measured advantages in {args.matrix or args.transfer}: {Correlation(**corr)}")
     else:

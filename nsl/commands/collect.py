@@ -18,12 +18,15 @@ from nsl.services.options import CollectConfig
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_parser(
-        sub, "collect", help="collect grasp episodes into a versioned dataset (resumable, parallel)",
+        sub,
+        "collect",
+        help="collect grasp episodes into a versioned dataset (resumable, parallel)",
         description="Run a policy for N episodes in a shifted environment and write them as a LeRobot v3.0 "
-                    "dataset version under $NSL_HOME/datasets/NAME/. Running the same command again resumes an "
-                    "interrupted collection; asking an existing dataset for more episodes appends a new version.",
+        "dataset version under $NSL_HOME/datasets/NAME/. Running the same command again resumes an "
+        "interrupted collection; asking an existing dataset for more episodes appends a new version.",
         epilog="example: nsl collect --shift harsh_lighting --episodes 800 --policy oracle:0.5 "
-               "--data grasp-harsh --workers 2")
+        "--data grasp-harsh --workers 2",
+    )
     c = CollectConfig
     add_field(p, c, "shift", type=str, required=True)
     add_field(p, c, "episodes", type=int, required=True)
@@ -50,5 +53,3 @@ def run(args: argparse.Namespace) -> int:
     config = CollectConfig(**{f.name: getattr(args, f.name) for f in fields(CollectConfig)})
     collect(config, restart=args.restart, stop_after_files=args.stop_after_files, cluster=args.cluster)
     return 0
-
-

@@ -12,8 +12,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     from nsl.services import continual
 
     p = add_parser(
-        sub, "continual", help="fine-tune through a sequence of shifts; performance matrix, forgetting, transfer",
-        description=(continual.__doc__ or "").strip())
+        sub,
+        "continual",
+        help="fine-tune through a sequence of shifts; performance matrix, forgetting, transfer",
+        description=(continual.__doc__ or "").strip(),
+    )
     c = ContinualConfig
     add_field(p, c, "sequence", type=str, required=True)
     add_field(p, c, "init")

@@ -13,8 +13,12 @@ REF_HELP = "dataset reference NAME[@vN][:K] (latest version by default; :K = fir
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = add_parser(sub, "dataset", help="list, show, verify, tier and export datasets",
-                   description="Datasets live under $NSL_HOME/datasets/NAME/vN/ in LeRobot v3.0 layout.")
+    p = add_parser(
+        sub,
+        "dataset",
+        help="list, show, verify, tier and export datasets",
+        description="Datasets live under $NSL_HOME/datasets/NAME/vN/ in LeRobot v3.0 layout.",
+    )
     dsub = p.add_subparsers(dest="dataset_command", metavar="ACTION", required=True)
 
     q = add_parser(dsub, "ls", help="list every dataset version")
@@ -36,9 +40,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_json(q, '{"tiers": [...]}')
     q.set_defaults(func=_tiers)
 
-    q = add_parser(dsub, "export", help="write a version or tier as a plain LeRobot dataset directory",
-                        description="Write a plain LeRobot v3.0 directory (no nsl-only files, a README.md "
-                                    "dataset card with the provenance), ready for `huggingface-cli upload`.")
+    q = add_parser(
+        dsub,
+        "export",
+        help="write a version or tier as a plain LeRobot dataset directory",
+        description="Write a plain LeRobot v3.0 directory (no nsl-only files, a README.md "
+        "dataset card with the provenance), ready for `huggingface-cli upload`.",
+    )
     q.add_argument("ref", help=REF_HELP)
     q.add_argument("--out", type=Path, required=True, help="new output directory")
     q.add_argument("--repo-id", default=None, help="hub repo id for the dataset card title (e.g. user/grasp-harsh)")
@@ -58,8 +66,10 @@ def _ls(args: argparse.Namespace) -> int:
         _table(rows, ["ref", "episodes", "frames", "success_rate", "shift", "policy", "hash", "created"])
     for r in pending:
         a, b = r["episodes"]
-        print(f"unfinished: {r['name']} episodes {a}..{b - 1} ({r['settings']}), {r['staged']} of {b - a} staged; "
-              "run its `nsl collect` command again to resume")
+        print(
+            f"unfinished: {r['name']} episodes {a}..{b - 1} ({r['settings']}), {r['staged']} of {b - a} staged; "
+            "run its `nsl collect` command again to resume"
+        )
     return 0
 
 
@@ -78,10 +88,14 @@ def _show(args: argparse.Namespace) -> int:
         print(f"{k:<13} {v:.1%}" if k == "success_rate" else f"{k:<13} {v}")
     for c in prov["collections"]:
         env, spec = c["spec"]["env"], c["spec"]
-        print(f"collection    episodes {c['episodes'][0]}..{c['episodes'][1] - 1}: shift {env['shift']} "
-              f"({env['env_version']}, {env['split']} objects), policy {spec['policy_ref']}, seed {spec['seed']}")
-    print(f"created       {created.get('time')} by nsl {created.get('code_version')} "
-          f"({created.get('workers', '?')} workers)")
+        print(
+            f"collection    episodes {c['episodes'][0]}..{c['episodes'][1] - 1}: shift {env['shift']} "
+            f"({env['env_version']}, {env['split']} objects), policy {spec['policy_ref']}, seed {spec['seed']}"
+        )
+    print(
+        f"created       {created.get('time')} by nsl {created.get('code_version')} "
+        f"({created.get('workers', '?')} workers)"
+    )
     return 0
 
 
@@ -116,8 +130,10 @@ def _export(args: argparse.Namespace) -> int:
     from nsl.datasets import api
 
     out = api.export(args.ref, args.out, args.repo_id)
-    print(f"exported {args.ref} to {out}; upload with: huggingface-cli upload --repo-type dataset "
-          f"{args.repo_id or 'USER/NAME'} {out}")
+    print(
+        f"exported {args.ref} to {out}; upload with: huggingface-cli upload --repo-type dataset "
+        f"{args.repo_id or 'USER/NAME'} {out}"
+    )
     return 0
 
 

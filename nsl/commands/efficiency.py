@@ -11,10 +11,14 @@ from nsl.services.options import EfficiencyConfig
 def register(sub: argparse._SubParsersAction) -> None:
     from nsl.services import efficiency
 
-    p = add_parser(sub, "efficiency", help="fine-tune on each dataset tier and evaluate: success vs target attempts",
-                   description=(efficiency.__doc__ or "").split("\n\n", 1)[1].strip(),
-                   epilog="example: nsl efficiency --data grasp-harsh --sizes 25,50,100,200,400,800 "
-                          "--init ckpt:base --base-data grasp-base --name efficiency-harsh")
+    p = add_parser(
+        sub,
+        "efficiency",
+        help="fine-tune on each dataset tier and evaluate: success vs target attempts",
+        description=(efficiency.__doc__ or "").split("\n\n", 1)[1].strip(),
+        epilog="example: nsl efficiency --data grasp-harsh --sizes 25,50,100,200,400,800 "
+        "--init ckpt:base --base-data grasp-base --name efficiency-harsh",
+    )
     c = EfficiencyConfig
     add_field(p, c, "data", action="append", required=True, metavar="REF")
     add_field(p, c, "sizes", type=_sizes)

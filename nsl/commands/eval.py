@@ -11,16 +11,27 @@ from nsl.services.options import EvaluateOptions
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_parser(
-        sub, "eval", help="success rate of checkpoints or scripted policies per shift, with 95%% intervals",
+        sub,
+        "eval",
+        help="success rate of checkpoints or scripted policies per shift, with 95%% intervals",
         description="Evaluate on test objects. Episode i uses scene seed (--seed, i) on every shift and for every "
-                    "policy, so policies evaluated with the same seed see identical scenes; with two policies a "
-                    "paired comparison (McNemar's exact test) is printed too. Checkpoint results are stored in the "
-                    "catalog (they drive ckpt:NAME@best).")
+        "policy, so policies evaluated with the same seed see identical scenes; with two policies a "
+        "paired comparison (McNemar's exact test) is printed too. Checkpoint results are stored in the "
+        "catalog (they drive ckpt:NAME@best).",
+    )
     who = p.add_mutually_exclusive_group()
-    who.add_argument("--checkpoint", default=None, metavar="REF[,REF]",
-                     help="comma-separated checkpoint refs, e.g. ckpt:base,ckpt:harsh@best")
-    who.add_argument("--policy", default=None, metavar="REF[,REF]",
-                     help="comma-separated policies: random | oracle[:NOISE] | ckpt:NAME (default: oracle)")
+    who.add_argument(
+        "--checkpoint",
+        default=None,
+        metavar="REF[,REF]",
+        help="comma-separated checkpoint refs, e.g. ckpt:base,ckpt:harsh@best",
+    )
+    who.add_argument(
+        "--policy",
+        default=None,
+        metavar="REF[,REF]",
+        help="comma-separated policies: random | oracle[:NOISE] | ckpt:NAME (default: oracle)",
+    )
     for name in ("shift", "severity", "episodes", "workers", "batch_size", "split", "seed"):
         add_field(p, EvaluateOptions, name, **({"type": float} if name == "severity" else {}))
     out = p.add_mutually_exclusive_group()

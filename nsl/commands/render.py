@@ -10,12 +10,17 @@ from nsl.commands._options import add_parser, add_seed
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_parser(
-        sub, "render", help="write a PNG grid of first frames per shift (like Fig. 5.2)",
+        sub,
+        "render",
+        help="write a PNG grid of first frames per shift (like Fig. 5.2)",
         description="Render the first camera frame of several episodes for one shift or all of them. "
-                    "Columns share scene seeds, so each row differs from the base row only by its shift.")
-    p.add_argument("--shift", default="all",
-                   help="shift spec (e.g. harsh_lighting, harsh_lighting+checkerboard_backing@0.5) or 'all' "
-                        "for one row per shift")
+        "Columns share scene seeds, so each row differs from the base row only by its shift.",
+    )
+    p.add_argument(
+        "--shift",
+        default="all",
+        help="shift spec (e.g. harsh_lighting, harsh_lighting+checkerboard_backing@0.5) or 'all' for one row per shift",
+    )
     p.add_argument("--severity", type=float, default=None, help="severity for shifts given without @X (default 1.0)")
     p.add_argument("--episodes", type=int, default=4, help="columns: episodes per shift")
     p.add_argument("--image-size", type=int, default=64, help="camera resolution in pixels")
@@ -33,7 +38,14 @@ def run(args: argparse.Namespace) -> int:
     if args.episodes < 1 or args.scale < 1:
         raise ConfigError("--episodes and --scale must be at least 1")
     shifts = parse_shift_list(args.shift, args.severity)
-    out = render_gallery(shifts, args.out, episodes=args.episodes, seed=args.seed, image_size=args.image_size,
-                         scale=args.scale, split=args.split)
+    out = render_gallery(
+        shifts,
+        args.out,
+        episodes=args.episodes,
+        seed=args.seed,
+        image_size=args.image_size,
+        scale=args.scale,
+        split=args.split,
+    )
     print(f"wrote {out} ({len(shifts)} rows x {args.episodes} episodes)")
     return 0

@@ -9,20 +9,33 @@ from nsl.commands._options import add_json, add_parser, add_workers
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_parser(
-        sub, "study", help="run the whole study from a plan (resumable), show its progress, write its report",
+        sub,
+        "study",
+        help="run the whole study from a plan (resumable), show its progress, write its report",
         description="A study is a TOML plan (shipped: tiny, small, full, paper) run as a graph of collection, "
-                    "training and evaluation units. Finished units are skipped, so running the same command "
-                    "again resumes a killed study. Files go to $NSL_HOME/studies/NAME/.")
+        "training and evaluation units. Finished units are skipped, so running the same command "
+        "again resumes a killed study. Files go to $NSL_HOME/studies/NAME/.",
+    )
     ss = p.add_subparsers(dest="study_command", metavar="ACTION")
-    r = add_parser(ss, "run", help="run (or resume) a study", description="Run every unit of PLAN not done yet, "
-                      "then write the report.")
+    r = add_parser(
+        ss,
+        "run",
+        help="run (or resume) a study",
+        description="Run every unit of PLAN not done yet, then write the report.",
+    )
     r.add_argument("plan", help="a shipped plan (tiny, small, full, paper) or a path to a TOML plan")
     r.add_argument("--name", default=None, help="study name (default: the plan's name)")
-    add_workers(r, help="units run at once, each in its own process (1: one unit at a time, using every core; "
-                        "results are reproducible for the same --workers)")
+    add_workers(
+        r,
+        help="units run at once, each in its own process (1: one unit at a time, using every core; "
+        "results are reproducible for the same --workers)",
+    )
     r.add_argument("--quiet", action="store_true", help="no progress bars")
-    r.add_argument("--estimate", action="store_true",
-                   help="check the plan and print the estimated time of the units left, then stop")
+    r.add_argument(
+        "--estimate",
+        action="store_true",
+        help="check the plan and print the estimated time of the units left, then stop",
+    )
     r.set_defaults(func=_run)
     s = add_parser(ss, "status", help="units done, running and left, with the time spent")
     s.add_argument("name", help="the study's name (its folder under $NSL_HOME/studies)")
@@ -38,8 +51,9 @@ def _run(args: argparse.Namespace) -> int:
     from nsl.study import estimate_study, run_study, status_lines, study_dir
 
     if args.estimate:
-        print(f"{args.name or args.plan}: {estimate_study(args.plan, args.name)} on a quiet 2-core machine, "
-              f"--workers 1")
+        print(
+            f"{args.name or args.plan}: {estimate_study(args.plan, args.name)} on a quiet 2-core machine, --workers 1"
+        )
         return 0
     status = run_study(args.plan, args.name, workers=args.workers, progress=not args.quiet)
     print("\n".join(status_lines(status)[:1]))

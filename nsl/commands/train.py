@@ -15,15 +15,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     from nsl.learners.config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_LR_FACTOR, FINE_TUNE_STEPS
 
     p = add_parser(
-        sub, "train", help="pre-train (no --init) or fine-tune (--init CKPT) a Q-function offline",
+        sub,
+        "train",
+        help="pre-train (no --init) or fine-tune (--init CKPT) a Q-function offline",
         description="Offline QT-Opt on one or more dataset versions mixed by weight. Without --init this is "
-                    "pre-training; with --init it fine-tunes from a catalogued checkpoint with the fine-tuning "
-                    f"recipe: {FINE_TUNE_STEPS:,} steps at {FINE_TUNE_LR_FACTOR:.0%} of its learning rate, keeping "
-                    "its n-step returns and crop, with the conservative term at "
-                    f"{FINE_TUNE_CONSERVATIVE} (mix the target data 50/50 with the base data, as the study did; "
-                    "docs/learners.md). Running the same command again resumes from the last checkpoint. The final "
-                    "checkpoint (and, with early stopping, every evaluated one) is registered in the catalog under "
-                    "--name.")
+        "pre-training; with --init it fine-tunes from a catalogued checkpoint with the fine-tuning "
+        f"recipe: {FINE_TUNE_STEPS:,} steps at {FINE_TUNE_LR_FACTOR:.0%} of its learning rate, keeping "
+        "its n-step returns and crop, with the conservative term at "
+        f"{FINE_TUNE_CONSERVATIVE} (mix the target data 50/50 with the base data, as the study did; "
+        "docs/learners.md). Running the same command again resumes from the last checkpoint. The final "
+        "checkpoint (and, with early stopping, every evaluated one) is registered in the catalog under "
+        "--name.",
+    )
     c = TrainOptions
     add_field(p, c, "data", action="append", required=True, metavar="REF[=WEIGHT]")
     add_field(p, c, "init", metavar="CKPT")

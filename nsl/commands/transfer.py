@@ -9,22 +9,31 @@ from nsl.commands._options import add_json, add_parser, add_workers
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_parser(
-        sub, "transfer", help="measure the transfer-advantage matrix between tasks (resumable); `nsl curriculum` "
-                              "reads it",
+        sub,
+        "transfer",
+        help="measure the transfer-advantage matrix between tasks (resumable); `nsl curriculum` reads it",
         description="A transfer plan (shipped: tiny, small) names tasks: a shift, a checkpoint that has learned it "
-                    "and its target data. Every ordered pair is fine-tuned (source checkpoint on the target's data) "
-                    "and every target trained from scratch, recording success curves; A = AUC(fine-tune) / "
-                    "AUC(scratch). The runs are ordinary catalogued units of the study's scheduler, so running the "
-                    "same command again resumes. Files go to $NSL_HOME/transfers/NAME/ (docs/transfer.md).")
+        "and its target data. Every ordered pair is fine-tuned (source checkpoint on the target's data) "
+        "and every target trained from scratch, recording success curves; A = AUC(fine-tune) / "
+        "AUC(scratch). The runs are ordinary catalogued units of the study's scheduler, so running the "
+        "same command again resumes. Files go to $NSL_HOME/transfers/NAME/ (docs/transfer.md).",
+    )
     ss = p.add_subparsers(dest="transfer_command", metavar="ACTION")
-    r = add_parser(ss, "run", help="run (or resume) a transfer plan, then write its matrix",
-                   description="Run every unit of PLAN not done yet, then write matrix.json and matrix.md.")
+    r = add_parser(
+        ss,
+        "run",
+        help="run (or resume) a transfer plan, then write its matrix",
+        description="Run every unit of PLAN not done yet, then write matrix.json and matrix.md.",
+    )
     r.add_argument("plan", help="a shipped transfer plan (tiny, small) or a path to a TOML plan")
     r.add_argument("--name", default=None, help="transfer name (default: the plan's name; it prefixes checkpoints)")
     add_workers(r, help="units run at once, each in its own process (1: one unit at a time, using every core)")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
-    r.add_argument("--estimate", action="store_true",
-                   help="check the plan and the workspace, print the estimated time of the units left, then stop")
+    r.add_argument(
+        "--estimate",
+        action="store_true",
+        help="check the plan and the workspace, print the estimated time of the units left, then stop",
+    )
     r.set_defaults(func=_run)
     s = add_parser(ss, "status", help="units done, running and left, with the time spent")
     s.add_argument("name", help="the transfer's name (its folder under $NSL_HOME/transfers)")
@@ -34,17 +43,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     w.add_argument("name", help="the transfer's name (its folder under $NSL_HOME/transfers)")
     add_json(w, "the paths and the proxy's rank correlations")
     w.set_defaults(func=_report)
-    c = add_parser(ss, "curricula", help="follow the optimal and pessimal curricula of a finished transfer for real, "
-                                         "and compare their measured cost with the predicted one",
-                   description="Trains each tree of `nsl curriculum` as a real sequence (each task fine-tuned from "
-                               "the checkpoint the curriculum made for its parent), with training seeds the matrix "
-                               "did not use, and measures each edge's advantage, each tree's cost, and whether a "
-                               "task's transfer depends on how its source was reached. Resumable; writes "
-                               "$NSL_HOME/transfers/NAME/curricula/curricula.md (docs/transfer.md).")
+    c = add_parser(
+        ss,
+        "curricula",
+        help="follow the optimal and pessimal curricula of a finished transfer for real, "
+        "and compare their measured cost with the predicted one",
+        description="Trains each tree of `nsl curriculum` as a real sequence (each task fine-tuned from "
+        "the checkpoint the curriculum made for its parent), with training seeds the matrix "
+        "did not use, and measures each edge's advantage, each tree's cost, and whether a "
+        "task's transfer depends on how its source was reached. Resumable; writes "
+        "$NSL_HOME/transfers/NAME/curricula/curricula.md (docs/transfer.md).",
+    )
     c.add_argument("name", help="a transfer whose matrix is complete")
-    c.add_argument("--seed", type=_seed_list, default=None,
-                   help="training seeds, comma-separated, e.g. 2,3 (default: as many as the matrix's, after its "
-                        "highest)")
+    c.add_argument(
+        "--seed",
+        type=_seed_list,
+        default=None,
+        help="training seeds, comma-separated, e.g. 2,3 (default: as many as the matrix's, after its highest)",
+    )
     add_workers(c, help="units run at once, each in its own process (1: one unit at a time, using every core)")
     c.add_argument("--quiet", action="store_true", help="no progress bars")
     add_json(c, "the measured and predicted costs")
@@ -65,9 +81,13 @@ def _seed_list(text: str) -> tuple[int, ...]:
 def _summary(out: dict) -> list[str]:
     from nsl.curriculum import Correlation
 
-    lines = [f"matrix: {out['matrix']} ({out['measured']} of {out['pairs']} pairs measured)",
-             f"report: {out['report']}"]
-    lines += [f"offline proxy {k} vs measured advantage: {Correlation(**c)}" for k, c in out["rank_correlation"].items()]
+    lines = [
+        f"matrix: {out['matrix']} ({out['measured']} of {out['pairs']} pairs measured)",
+        f"report: {out['report']}",
+    ]
+    lines += [
+        f"offline proxy {k} vs measured advantage: {Correlation(**c)}" for k, c in out["rank_correlation"].items()
+    ]
     return lines
 
 
@@ -75,8 +95,10 @@ def _run(args: argparse.Namespace) -> int:
     from nsl.study import estimate_transfer, run_transfer, status_lines
 
     if args.estimate:
-        print(f"{args.name or args.plan}: {estimate_transfer(args.plan, args.name)} on a quiet 2-core machine, "
-              "--workers 1")
+        print(
+            f"{args.name or args.plan}: {estimate_transfer(args.plan, args.name)} on a quiet 2-core machine, "
+            "--workers 1"
+        )
         return 0
     status, report = run_transfer(args.plan, args.name, workers=args.workers, progress=not args.quiet)
     print("\n".join(status_lines(status, "transfer")[:1]))

@@ -33,8 +33,11 @@ GRID = {
 
 def choose(base: float, rates: dict[float, float], study_drop: float) -> float | None:
     """The severity whose drop is closest to the study's, among drops >= 10 within 15 points of it."""
-    ok = {s: 100 * (base - r) for s, r in rates.items()
-          if 100 * (base - r) >= 10 and abs(100 * (base - r) - study_drop) <= 15}
+    ok = {
+        s: 100 * (base - r)
+        for s, r in rates.items()
+        if 100 * (base - r) >= 10 and abs(100 * (base - r) - study_drop) <= 15
+    }
     return min(ok, key=lambda s: (abs(ok[s] - study_drop), s)) if ok else None
 
 
@@ -46,8 +49,11 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", type=Path, default=Path("calibration.json"))
     ap.add_argument("--only", nargs="*", choices=sorted(GRID), help="measure only these shifts")
-    ap.add_argument("--severities", type=lambda t: tuple(float(x) for x in t.split(",")),
-                    help="with one --only shift: measure these severities (comma-separated) instead of its grid")
+    ap.add_argument(
+        "--severities",
+        type=lambda t: tuple(float(x) for x in t.split(",")),
+        help="with one --only shift: measure these severities (comma-separated) instead of its grid",
+    )
     args = ap.parse_args()
     grid = {k: v for k, v in GRID.items() if not args.only or k in args.only}
     if args.severities:
@@ -56,8 +62,15 @@ def main() -> None:
         grid = {k: args.severities for k in grid}
 
     specs = ["base"] + [f"{name}@{s:g}" for name, g in grid.items() for s in g]
-    res = nsl.evaluate(args.checkpoint, shift=",".join(specs), episodes=args.episodes, seed=args.seed,
-                       workers=args.workers, source="calibration", progress=False)
+    res = nsl.evaluate(
+        args.checkpoint,
+        shift=",".join(specs),
+        episodes=args.episodes,
+        seed=args.seed,
+        workers=args.workers,
+        source="calibration",
+        progress=False,
+    )
     table = {str(k): v for k, v in res.table[args.checkpoint].items()}
     rate = {spec: table[spec].success_rate for spec in table}
     base = next(r for spec, r in rate.items() if spec in ("base", ""))
@@ -68,11 +81,16 @@ def main() -> None:
     for name, g in grid.items():
         rates = {s: rate[f"{name}@{s:g}" if s != 1.0 else name] for s in g}
         pick = choose(base, rates, STUDY_DROPS[name])
-        out["shifts"][name] = {"rates": {str(s): r for s, r in rates.items()}, "study_drop": STUDY_DROPS[name],
-                               "chosen": pick}
+        out["shifts"][name] = {
+            "rates": {str(s): r for s, r in rates.items()},
+            "study_drop": STUDY_DROPS[name],
+            "chosen": pick,
+        }
         for s, r in rates.items():
-            print(f"| {name} | {s:g} | {100 * r:.1f}% | {100 * (base - r):+.1f} | {STUDY_DROPS[name]} | "
-                  f"{'**yes**' if s == pick else ''} |")
+            print(
+                f"| {name} | {s:g} | {100 * r:.1f}% | {100 * (base - r):+.1f} | {STUDY_DROPS[name]} | "
+                f"{'**yes**' if s == pick else ''} |"
+            )
     args.out.write_text(json.dumps(out, indent=2) + "\n")
 
 

@@ -74,8 +74,13 @@ def load_transitions(ref: str, limit: int, seed: int, gamma: float) -> dict:
     a = view.episodes_arrays()
     labels = api.frame_labels(a, gamma=gamma)  # episode success, next-frame masks and Monte-Carlo returns
     ep, n = labels.episode, len(labels.episode)
-    reward, done, following, success, ret = labels.reward, labels.done, labels.following, labels.success, \
-        labels.mc_return
+    reward, done, following, success, ret = (
+        labels.reward,
+        labels.done,
+        labels.following,
+        labels.success,
+        labels.mc_return,
+    )
     success_of = labels.episode_success
     first = labels.first
     usable = np.flatnonzero(labels.known)  # a truncated episode's last frame has no known target
@@ -83,14 +88,23 @@ def load_transitions(ref: str, limit: int, seed: int, gamma: float) -> dict:
     pick = np.sort(rng.choice(usable, size=min(limit, len(usable)), replace=False))
     nxt = np.where(following[pick], pick + 1, pick)
     return {
-        "ref": ref, "episodes": int(len(success_of)), "frames": int(n),
+        "ref": ref,
+        "episodes": int(len(success_of)),
+        "frames": int(n),
         "success_rate": float(np.mean(list(success_of.values()))),
-        "image": a[keys.OBS_IMAGE][pick], "state": a[keys.OBS_STATE][pick].astype(np.float32),
-        "next_image": a[keys.OBS_IMAGE][nxt], "next_state": a[keys.OBS_STATE][nxt].astype(np.float32),
-        "action": a[keys.ACTION][pick].astype(np.float32), "reward": reward[pick].astype(np.float32),
-        "done": done[pick].astype(np.float32), "success": success[pick], "mc_return": ret[pick],
-        "first": first[pick], "first_success": np.array([success_of[e] for e in ep[first]]),
-        "first_image": a[keys.OBS_IMAGE][first], "first_state": a[keys.OBS_STATE][first].astype(np.float32),
+        "image": a[keys.OBS_IMAGE][pick],
+        "state": a[keys.OBS_STATE][pick].astype(np.float32),
+        "next_image": a[keys.OBS_IMAGE][nxt],
+        "next_state": a[keys.OBS_STATE][nxt].astype(np.float32),
+        "action": a[keys.ACTION][pick].astype(np.float32),
+        "reward": reward[pick].astype(np.float32),
+        "done": done[pick].astype(np.float32),
+        "success": success[pick],
+        "mc_return": ret[pick],
+        "first": first[pick],
+        "first_success": np.array([success_of[e] for e in ep[first]]),
+        "first_image": a[keys.OBS_IMAGE][first],
+        "first_state": a[keys.OBS_STATE][first].astype(np.float32),
     }
 
 
@@ -98,10 +112,19 @@ def summary(x: np.ndarray) -> dict:
     x = np.asarray(x, dtype=np.float64)
     p = 1.0 / (1.0 + np.exp(-x))
     pct = np.percentile(x, [1, 5, 50, 95, 99])
-    return {"mean": float(x.mean()), "std": float(x.std()), "p1": float(pct[0]), "p5": float(pct[1]),
-            "median": float(pct[2]), "p95": float(pct[3]), "p99": float(pct[4]), "min": float(x.min()),
-            "max": float(x.max()), "saturated": float(np.mean(np.abs(x) > SATURATED)),
-            "sigmoid_slope": float(np.mean(p * (1.0 - p)))}
+    return {
+        "mean": float(x.mean()),
+        "std": float(x.std()),
+        "p1": float(pct[0]),
+        "p5": float(pct[1]),
+        "median": float(pct[2]),
+        "p95": float(pct[3]),
+        "p99": float(pct[4]),
+        "min": float(x.min()),
+        "max": float(x.max()),
+        "saturated": float(np.mean(np.abs(x) > SATURATED)),
+        "sigmoid_slope": float(np.mean(p * (1.0 - p))),
+    }
 
 
 def ranks(features: np.ndarray) -> dict:
@@ -112,8 +135,11 @@ def ranks(features: np.ndarray) -> dict:
         return {"effective_rank": 0.0, "srank": 0, "dims": int(features.shape[1])}
     p = s / s.sum()
     srank = int(np.searchsorted(np.cumsum(p), 1.0 - SRANK_DELTA) + 1)
-    return {"effective_rank": float(np.exp(-(p * np.log(p)).sum())), "srank": min(srank, len(s)),
-            "dims": int(features.shape[1])}
+    return {
+        "effective_rank": float(np.exp(-(p * np.log(p)).sum())),
+        "srank": min(srank, len(s)),
+        "dims": int(features.shape[1]),
+    }
 
 
 def dormant(scores: np.ndarray, taus: list[float]) -> dict:
@@ -131,8 +157,12 @@ def forward(net, image: torch.Tensor, state: torch.Tensor, action: torch.Tensor)
     for c, k in zip(net.columns, caches):
         logit, acts = c.score(k, action.unsqueeze(1), heads)
         heads.append(acts)
-    return {"logit": logit.squeeze(1), "convs": cache["convs"], "flat": cache["flat"],
-            "head": [h.squeeze(1) for h in heads[-1]]}
+    return {
+        "logit": logit.squeeze(1),
+        "convs": cache["convs"],
+        "flat": cache["flat"],
+        "head": [h.squeeze(1) for h in heads[-1]],
+    }
 
 
 def measure(net, data: dict, cfg: TrainConfig, taus: list[float], seed: int) -> dict:
@@ -153,12 +183,23 @@ def measure(net, data: dict, cfg: TrainConfig, taus: list[float], seed: int) -> 
         b = len(action)
         noise = noise_from_generator(b, action.shape[1], cfg.cem, gen)
         with torch.no_grad():
-            target, _ = bellman_target(net, net, to_float(torch.from_numpy(data["next_image"][sl])),
-                                       torch.from_numpy(data["next_state"][sl]), torch.from_numpy(data["reward"][sl]),
-                                       torch.from_numpy(data["done"][sl]), cfg.gamma, cfg.cem, noise)
+            target, _ = bellman_target(
+                net,
+                net,
+                to_float(torch.from_numpy(data["next_image"][sl])),
+                torch.from_numpy(data["next_state"][sl]),
+                torch.from_numpy(data["reward"][sl]),
+                torch.from_numpy(data["done"][sl]),
+                cfg.gamma,
+                cfg.cem,
+                noise,
+            )
             ctx = net.encode(image, state)
-            _, best_logit = cem_maximize(lambda cand: net.score(ctx, cand),
-                                         noise_from_generator(b, action.shape[1], cfg.cem, gen), cfg.cem)
+            _, best_logit = cem_maximize(
+                lambda cand, ctx=ctx: net.score(ctx, cand),
+                noise_from_generator(b, action.shape[1], cfg.cem, gen),
+                cfg.cem,
+            )
             rand = torch.rand(b, 32, action.shape[1], generator=gen) * 2.0 - 1.0
             spreads.append(net.score(ctx, rand).std(dim=1))
         out = forward(net, image, state, action)
@@ -195,33 +236,49 @@ def measure(net, data: dict, cfg: TrainConfig, taus: list[float], seed: int) -> 
     with torch.no_grad():
         v0 = []
         for i in range(0, len(data["first_state"]), CHUNK):
-            image = to_float(torch.from_numpy(data["first_image"][i:i + CHUNK]))
-            state = torch.from_numpy(data["first_state"][i:i + CHUNK])
+            image = to_float(torch.from_numpy(data["first_image"][i : i + CHUNK]))
+            state = torch.from_numpy(data["first_state"][i : i + CHUNK])
             ctx = net.encode(image, state)
-            _, lg = cem_maximize(lambda cand: net.score(ctx, cand),
-                                 noise_from_generator(len(state), len(net.cfg.action_dims), cfg.cem, gen), cfg.cem)
+            _, lg = cem_maximize(
+                lambda cand, ctx=ctx: net.score(ctx, cand),
+                noise_from_generator(len(state), len(net.cfg.action_dims), cfg.cem, gen),
+                cfg.cem,
+            )
             v0.append(torch.sigmoid(lg))
     v0 = torch.cat(v0).numpy().astype(np.float64)
     ret = data["mc_return"]
     return {
         "transitions": int(n),
-        "logits": summary(logit), "max_logits": summary(best),
-        "logits_by_outcome": {"success": float(logit[succ].mean()) if succ.any() else None,
-                              "failure": float(logit[~succ].mean()) if (~succ).any() else None},
-        "values": {"q_mean": float(q.mean()), "target_mean": float(target.mean()), "return_mean": float(ret.mean()),
-                   "optimism": float(target.mean() - ret.mean()), "q_minus_return": float(q.mean() - ret.mean()),
-                   "target_on_failures": float(target[~succ].mean()) if (~succ).any() else None,
-                   "return_on_failures": float(ret[~succ].mean()) if (~succ).any() else None,
-                   "abs_q_minus_target": float(np.abs(q - target).mean()),
-                   "v0_mean": float(v0.mean()), "success_rate": float(data["success_rate"]),
-                   "v0_on_failures": float(v0[~data["first_success"]].mean()) if (~data["first_success"]).any() else None},
-        "action_spread": {"logit_std_over_actions": float(torch.cat(spreads).mean()),
-                          "best_minus_data_logit": float((best - logit).mean())},
+        "logits": summary(logit),
+        "max_logits": summary(best),
+        "logits_by_outcome": {
+            "success": float(logit[succ].mean()) if succ.any() else None,
+            "failure": float(logit[~succ].mean()) if (~succ).any() else None,
+        },
+        "values": {
+            "q_mean": float(q.mean()),
+            "target_mean": float(target.mean()),
+            "return_mean": float(ret.mean()),
+            "optimism": float(target.mean() - ret.mean()),
+            "q_minus_return": float(q.mean() - ret.mean()),
+            "target_on_failures": float(target[~succ].mean()) if (~succ).any() else None,
+            "return_on_failures": float(ret[~succ].mean()) if (~succ).any() else None,
+            "abs_q_minus_target": float(np.abs(q - target).mean()),
+            "v0_mean": float(v0.mean()),
+            "success_rate": float(data["success_rate"]),
+            "v0_on_failures": float(v0[~data["first_success"]].mean()) if (~data["first_success"]).any() else None,
+        },
+        "action_spread": {
+            "logit_std_over_actions": float(torch.cat(spreads).mean()),
+            "best_minus_data_logit": float((best - logit).mean()),
+        },
         "auc": auc,
         "dormant": {name: dormant(s, taus) for name, s in layers.items()},
         "rank": {"trunk": ranks(torch.cat(flats).numpy()), "head_last": ranks(torch.cat(lasts).numpy())},
-        "gradient": {"total": float(np.sqrt(sum(grads.values()))),
-                     "layers": {k: float(np.sqrt(v)) for k, v in grads.items()}},
+        "gradient": {
+            "total": float(np.sqrt(sum(grads.values()))),
+            "layers": {k: float(np.sqrt(v)) for k, v in grads.items()},
+        },
     }
 
 
@@ -240,23 +297,43 @@ def weight_change(reference, net) -> dict:
     return {"total": total, "layers": {k: float(np.sqrt(num[k] / max(den[k], 1e-30))) for k in num}}
 
 
-def diagnose(checkpoints: list[str], datasets: list[str], transitions: int = 2000, seed: int = 0,
-             taus: tuple[float, ...] = (0.0, 0.025, 0.1)) -> dict:
+def diagnose(
+    checkpoints: list[str],
+    datasets: list[str],
+    transitions: int = 2000,
+    seed: int = 0,
+    taus: tuple[float, ...] = (0.0, 0.025, 0.1),
+) -> dict:
     """The measurements of every checkpoint on every dataset, and the weight changes from the first checkpoint."""
     if not checkpoints or not datasets:
         raise ConfigError("give at least one --checkpoint and one --data")
     loaded = [(ref, load_checkpoint(resolve_checkpoint(ref))) for ref in checkpoints]
     cfg = loaded[0][1].training
     data = {ref: load_transitions(ref, transitions, seed, cfg.gamma) for ref in datasets}
-    out: dict = {"gamma": cfg.gamma, "seed": seed, "taus": list(taus), "checkpoints": {}, "data": {},
-                 "measurements": {}, "weight_change": {}}
+    out: dict = {
+        "gamma": cfg.gamma,
+        "seed": seed,
+        "taus": list(taus),
+        "checkpoints": {},
+        "data": {},
+        "measurements": {},
+        "weight_change": {},
+    }
     for ref, d in data.items():
-        out["data"][ref] = {"episodes": d["episodes"], "frames": d["frames"], "success_rate": d["success_rate"],
-                            "measured_transitions": int(len(d["reward"]))}
+        out["data"][ref] = {
+            "episodes": d["episodes"],
+            "frames": d["frames"],
+            "success_rate": d["success_rate"],
+            "measured_transitions": int(len(d["reward"])),
+        }
     for ref, ckpt in loaded:
-        out["checkpoints"][ref] = {"path": str(ckpt.path), "id": ckpt.id, "step": ckpt.step,
-                                   "method": ckpt.config["method"],
-                                   "parent": (ckpt.config.get("parent") or {}).get("id")}
+        out["checkpoints"][ref] = {
+            "path": str(ckpt.path),
+            "id": ckpt.id,
+            "step": ckpt.step,
+            "method": ckpt.config["method"],
+            "parent": (ckpt.config.get("parent") or {}).get("id"),
+        }
         out["measurements"][ref] = {dref: measure(ckpt.net, d, cfg, list(taus), seed) for dref, d in data.items()}
         if ref != loaded[0][0]:
             out["weight_change"][ref] = {"reference": loaded[0][0], **weight_change(loaded[0][1].net, ckpt.net)}
@@ -264,29 +341,58 @@ def diagnose(checkpoints: list[str], datasets: list[str], transitions: int = 200
 
 
 def print_table(result: dict) -> None:
-    cols = ("logit mean", "|l|>5", "max-logit", "Q", "target", "return", "optimism", "AUC", "dormant.1",
-            "trunk erank", "grad")
+    cols = (
+        "logit mean",
+        "|l|>5",
+        "max-logit",
+        "Q",
+        "target",
+        "return",
+        "optimism",
+        "AUC",
+        "dormant.1",
+        "trunk erank",
+        "grad",
+    )
     print("| checkpoint | data | " + " | ".join(cols) + " |")
     print("|---" * (len(cols) + 2) + "|")
     for ref, per in result["measurements"].items():
         for dref, m in per.items():
-            dead = np.mean([v["tau=0.1"] for v in m["dormant"].values()]) if "tau=0.1" in next(
-                iter(m["dormant"].values())) else float("nan")
+            dead = (
+                np.mean([v["tau=0.1"] for v in m["dormant"].values()])
+                if "tau=0.1" in next(iter(m["dormant"].values()))
+                else float("nan")
+            )
             v = m["values"]
-            row = (f"{m['logits']['mean']:.2f}", f"{m['logits']['saturated']:.2f}", f"{m['max_logits']['mean']:.2f}",
-                   f"{v['q_mean']:.3f}", f"{v['target_mean']:.3f}", f"{v['return_mean']:.3f}", f"{v['optimism']:+.3f}",
-                   "-" if m["auc"] is None else f"{m['auc']:.3f}", f"{dead:.3f}",
-                   f"{m['rank']['trunk']['effective_rank']:.1f}", f"{m['gradient']['total']:.3f}")
+            row = (
+                f"{m['logits']['mean']:.2f}",
+                f"{m['logits']['saturated']:.2f}",
+                f"{m['max_logits']['mean']:.2f}",
+                f"{v['q_mean']:.3f}",
+                f"{v['target_mean']:.3f}",
+                f"{v['return_mean']:.3f}",
+                f"{v['optimism']:+.3f}",
+                "-" if m["auc"] is None else f"{m['auc']:.3f}",
+                f"{dead:.3f}",
+                f"{m['rank']['trunk']['effective_rank']:.1f}",
+                f"{m['gradient']['total']:.3f}",
+            )
             print(f"| {ref} | {dref} | " + " | ".join(row) + " |")
     for ref, w in result["weight_change"].items():
-        print(f"weight change {w['reference']} -> {ref}: {w['total']:.4f} overall; " + ", ".join(
-            f"{k} {v:.4f}" for k, v in w["layers"].items()))
+        print(
+            f"weight change {w['reference']} -> {ref}: {w['total']:.4f} overall; "
+            + ", ".join(f"{k} {v:.4f}" for k, v in w["layers"].items())
+        )
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--checkpoint", action="append", required=True, help="ckpt:NAME[@STEP] or a folder; the first "
-                   "is the reference for the weight changes (repeat)")
+    p.add_argument(
+        "--checkpoint",
+        action="append",
+        required=True,
+        help="ckpt:NAME[@STEP] or a folder; the first is the reference for the weight changes (repeat)",
+    )
     p.add_argument("--data", action="append", required=True, help="dataset NAME[@vN][:K] (repeat)")
     p.add_argument("--transitions", type=int, default=2000, help="transitions measured per dataset (a seeded subset)")
     p.add_argument("--seed", type=int, default=0, help="seed of the subset and of CEM's noise")

@@ -1,6 +1,6 @@
 """A research probe behind docs/experiments/plateau.md, "Where the fine-tunes plateau": the study's fine-tune with
-implicit Q-learning's targets (Kostrikov et al. 2022) instead of QT-Opt's, to test whether a learner that bootstraps only
-through actions the data took improves more than one step over the policy that collected the target data.
+implicit Q-learning's targets (Kostrikov et al. 2022) instead of QT-Opt's, to test whether a learner that bootstraps
+only through actions the data took improves more than one step over the policy that collected the target data.
 
 From a parent checkpoint, on the given data mix (one-step transitions):
 
@@ -67,7 +67,7 @@ def main() -> None:
         with torch.no_grad():
             q_data = torch.sigmoid(q_polyak(image, state, action))
         diff = q_data - torch.sigmoid(v(image, state, zero))
-        v_loss = (torch.abs(args.tau - (diff < 0).float()) * diff ** 2).mean()
+        v_loss = (torch.abs(args.tau - (diff < 0).float()) * diff**2).mean()
         opt_v.zero_grad(set_to_none=True)
         v_loss.backward()
         opt_v.step()
@@ -86,8 +86,14 @@ def main() -> None:
         if step % 100 == 0:
             bar.set_postfix(q_loss=f"{q_loss.item():.4f}", v_loss=f"{v_loss.item():.5f}", v=f"{v_next.mean():.3f}")
     parent_info = {"id": checkpoint_id(parent.path), "step": parent.step, "method": parent.config["method"]}
-    config = checkpoint_config(q, training=cfg, method="ft", data={**sampler.describe(), "probe": "iql",
-                               "tau": args.tau, "v_warmup": args.v_warmup}, parent=parent_info, step=args.steps)
+    config = checkpoint_config(
+        q,
+        training=cfg,
+        method="ft",
+        data={**sampler.describe(), "probe": "iql", "tau": args.tau, "v_warmup": args.v_warmup},
+        parent=parent_info,
+        step=args.steps,
+    )
     save_checkpoint(args.out, q.eval(), config)
     print(f"wrote {args.out}")
 

@@ -5,7 +5,8 @@ checkpoints. Each prints the success on test scenes of one shift (default: the b
 seed (--seed, i), so the scenes are those of `nsl eval --episodes N --seed S`. Checkpoints are folders
 (catalogued ones live in $NSL_HOME/checkpoints).
 
-    .venv/bin/python scripts/experiments/probe_policies.py cem --samples 256 --elites 16 --iterations 3 --seed 3000 DIR...
+    .venv/bin/python scripts/experiments/probe_policies.py cem --samples 256 --elites 16 --iterations 3 \
+        --seed 3000 DIR...
     .venv/bin/python scripts/experiments/probe_policies.py polyak --seed 3000 DIR...    # DIR must hold trainer_state.pt
     .venv/bin/python scripts/experiments/probe_policies.py ensemble --seed 2000 DIR DIR DIR DIR
 """
@@ -23,8 +24,16 @@ import torch
 
 from nsl.collectors import parse_shift
 from nsl.eval import EvalConfig, evaluate
-from nsl.learners import (CHECKPOINT_FORMAT, CONFIG_FILE, MODEL_FILE, TRAINER_FILE, CemConfig, CEMPolicy,
-                          load_checkpoint, load_policy)
+from nsl.learners import (
+    CHECKPOINT_FORMAT,
+    CONFIG_FILE,
+    MODEL_FILE,
+    TRAINER_FILE,
+    CemConfig,
+    CEMPolicy,
+    load_checkpoint,
+    load_policy,
+)
 
 
 class MeanQNet(torch.nn.Module):
@@ -63,8 +72,10 @@ def report(label: str, make_policy, args) -> None:
     cfg = EvalConfig(episodes=args.episodes, seed=args.seed, workers=args.workers)
     spec = parse_shift(args.shift)
     r = evaluate(make_policy, [spec], cfg, progress=False)[spec.name]
-    print(f"{label}: {r.successes}/{r.episodes} = {r.successes / r.episodes:.1%} ({spec.name}, seed {args.seed})",
-          flush=True)
+    print(
+        f"{label}: {r.successes}/{r.episodes} = {r.successes / r.episodes:.1%} ({spec.name}, seed {args.seed})",
+        flush=True,
+    )
 
 
 def main() -> None:
@@ -84,11 +95,17 @@ def main() -> None:
     elif args.probe == "cem":
         cem = dict(samples=args.samples, elites=args.elites, iterations=args.iterations)
         for d in args.dirs:
-            report(f"{d} CEM {args.samples}/{args.elites}/{args.iterations}", functools.partial(load_policy, d, **cem), args)
+            report(
+                f"{d} CEM {args.samples}/{args.elites}/{args.iterations}",
+                functools.partial(load_policy, d, **cem),
+                args,
+            )
     else:
         with tempfile.TemporaryDirectory() as tmp:
             for i, d in enumerate(args.dirs):
-                report(f"{d} Polyak", functools.partial(load_policy, str(polyak_folder(Path(d), Path(tmp) / str(i)))), args)
+                report(
+                    f"{d} Polyak", functools.partial(load_policy, str(polyak_folder(Path(d), Path(tmp) / str(i)))), args
+                )
 
 
 if __name__ == "__main__":

@@ -15,8 +15,13 @@ import json
 import sys
 from pathlib import Path
 
-SHIFTS = ["harsh_lighting", "transparent_objects@0.8", "checkerboard_backing@0.6", "extend_gripper@2.5",
-          "offset_gripper@0.35"]
+SHIFTS = [
+    "harsh_lighting",
+    "transparent_objects@0.8",
+    "checkerboard_backing@0.6",
+    "extend_gripper@2.5",
+    "offset_gripper@0.35",
+]
 
 
 def slug(shift: str) -> str:
@@ -31,8 +36,10 @@ def rate(path: Path, shift: str) -> float | None:
 
 def main(folder: Path) -> None:
     base = {s: rate(folder / "base.json", s) for s in [*SHIFTS, "base"]}
-    print("| recipe | " + " | ".join(f"{s}: shift / base task" for s in SHIFTS) + " | mean gain | base task "
-          "within 10 / at the base's |")
+    print(
+        "| recipe | " + " | ".join(f"{s}: shift / base task" for s in SHIFTS) + " | mean gain | base task "
+        "within 10 / at the base's |"
+    )
     print("|---|" + "---|" * (len(SHIFTS) + 2))
     print("| base checkpoint | " + " | ".join(f"{base[s]:.1f} / {base['base']:.1f}" for s in SHIFTS) + " | - | - |")
     for recipe in ("protocol", "cons01", "cons03"):

@@ -67,16 +67,21 @@ def refusal(src: Path, command: dict[str, Any]) -> str | None:
             problems.append(f"its training data {ref} cannot be checked here ({e})")
             continue
         if d.get("hash") and chain[0][1].get("hash") != d["hash"]:
-            problems.append(f"its training data {ref} has hash {str(chain[0][1].get('hash'))[:19]}... here, the run "
-                            f"recorded {d['hash'][:19]}...")
+            problems.append(
+                f"its training data {ref} has hash {str(chain[0][1].get('hash'))[:19]}... here, the run "
+                f"recorded {d['hash'][:19]}..."
+            )
         for vref, manifest in chain:
             cv = (manifest.get("created") or {}).get("code_version")
             if is_dirty(cv):
                 problems.append(f"its training data {vref} was collected by uncommitted code ({cv})")
     if not problems:
         return None
-    return (f"refusing to ship {src}: " + "; ".join(problems)
-            + "; commit the code, then collect and train again with the committed code")
+    return (
+        f"refusing to ship {src}: "
+        + "; ".join(problems)
+        + "; commit the code, then collect and train again with the committed code"
+    )
 
 
 def main(run: str, step: int, dst: Path = ASSET) -> None:

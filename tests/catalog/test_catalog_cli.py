@@ -8,12 +8,11 @@ import time
 from pathlib import Path
 
 import pytest
+from catalog_factories import make_checkpoint, make_dataset
 
 from nsl import workspace
 from nsl.catalog import WEIGHTS_FILE, Catalog
 from tests.conftest import run_cli
-
-from catalog_factories import make_checkpoint, make_dataset
 
 
 @pytest.fixture
@@ -22,9 +21,15 @@ def chain(tmp_path):
         make_dataset(cat, "grasp-base", 1, "base", 3000)
         make_dataset(cat, "harsh", 1, "harsh_lighting", 800)
         base = make_checkpoint(cat, tmp_path, "base", 50000, 0.0, data=[cat.resolve_data("data:grasp-base").use()])
-        h1 = make_checkpoint(cat, tmp_path, "harsh", 1000, 1.0, parent=base.id,
-                             data=[cat.resolve_data("data:grasp-base").use(0.5),
-                                   cat.resolve_data("data:harsh:800").use(0.5)])
+        h1 = make_checkpoint(
+            cat,
+            tmp_path,
+            "harsh",
+            1000,
+            1.0,
+            parent=base.id,
+            data=[cat.resolve_data("data:grasp-base").use(0.5), cat.resolve_data("data:harsh:800").use(0.5)],
+        )
         h2 = make_checkpoint(cat, tmp_path, "harsh", 2000, 2.0, parent=base.id, data=h1.data)
         cat.add_evaluation(h1.id, "harsh_lighting", episodes=100, successes=61, seed=7)
         cat.add_evaluation(h2.id, "harsh_lighting", episodes=100, successes=48, seed=7)

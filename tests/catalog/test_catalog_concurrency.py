@@ -5,9 +5,9 @@ from __future__ import annotations
 import multiprocessing as mp
 from pathlib import Path
 
-from nsl.catalog import SCHEMA_VERSION, Catalog
-
 from catalog_factories import make_checkpoint, make_dataset
+
+from nsl.catalog import SCHEMA_VERSION, Catalog
 
 PER_PROCESS = 100
 
@@ -20,8 +20,15 @@ def _register_many(worker: int, tmp: str, barrier, errors) -> None:
             for i in range(PER_PROCESS):
                 # the same 20 datasets from both processes: idempotent under the race
                 data = make_dataset(cat, f"shared-{i % 20}", 1, "base", 10)
-                ck = make_checkpoint(cat, Path(tmp), f"w{worker}", i, worker * 1000 + i, parent=parent,
-                                     data=[cat.resolve_data(f"data:{data.name}@v1").use()])
+                ck = make_checkpoint(
+                    cat,
+                    Path(tmp),
+                    f"w{worker}",
+                    i,
+                    worker * 1000 + i,
+                    parent=parent,
+                    data=[cat.resolve_data(f"data:{data.name}@v1").use()],
+                )
                 cat.add_evaluation(ck.id, "base", episodes=10, successes=i % 11, seed=worker)
                 parent = ck.id
     except BaseException as e:  # reported to the parent, which fails the test

@@ -7,15 +7,24 @@ import json
 from pathlib import Path
 
 import pytest
+from catalog_factories import make_checkpoint, make_dataset, weights_file
 from safetensors.numpy import load_file
 
 from nsl.catalog import (
-    CARD_FILE, CONFIG_FILE, WEIGHTS_FILE, Catalog, DataUse, best_checkpoint, checkpoint_id, folder_checkpoint_id,
-    format_descendants, format_lineage, parse_checkpoint_ref, parse_data_ref,
+    CARD_FILE,
+    CONFIG_FILE,
+    WEIGHTS_FILE,
+    Catalog,
+    DataUse,
+    best_checkpoint,
+    checkpoint_id,
+    folder_checkpoint_id,
+    format_descendants,
+    format_lineage,
+    parse_checkpoint_ref,
+    parse_data_ref,
 )
 from nsl.errors import ConfigError, UnknownReferenceError
-
-from catalog_factories import make_checkpoint, make_dataset, weights_file
 
 
 @pytest.fixture
@@ -31,12 +40,24 @@ def chain(cat, tmp_path):
     harsh_data = make_dataset(cat, "harsh", 1, "harsh_lighting", 800)
     clear_data = make_dataset(cat, "clear", 2, "transparent_objects", 800)
     base = make_checkpoint(cat, tmp_path, "base", 50000, 0.0, data=[cat.resolve_data("data:grasp-base").use()])
-    harsh = make_checkpoint(cat, tmp_path, "harsh", 20000, 1.0, parent=base.id,
-                            data=[cat.resolve_data("data:grasp-base@v1").use(0.5),
-                                  cat.resolve_data("data:harsh@v1:800").use(0.5)])
-    clear = make_checkpoint(cat, tmp_path, "harsh-clear", 20000, 2.0, parent=harsh.id,
-                            data=[cat.resolve_data("data:grasp-base").use(0.5),
-                                  cat.resolve_data("data:clear@v2:400").use(0.5)])
+    harsh = make_checkpoint(
+        cat,
+        tmp_path,
+        "harsh",
+        20000,
+        1.0,
+        parent=base.id,
+        data=[cat.resolve_data("data:grasp-base@v1").use(0.5), cat.resolve_data("data:harsh@v1:800").use(0.5)],
+    )
+    clear = make_checkpoint(
+        cat,
+        tmp_path,
+        "harsh-clear",
+        20000,
+        2.0,
+        parent=harsh.id,
+        data=[cat.resolve_data("data:grasp-base").use(0.5), cat.resolve_data("data:clear@v2:400").use(0.5)],
+    )
     return {"data": (base_data, harsh_data, clear_data), "ckpts": (base, harsh, clear)}
 
 
@@ -59,7 +80,9 @@ def test_lineage_across_three_step_fine_tuning_chain(cat, chain):
     assert [c.id for c in lineage] == [clear.id, harsh.id, base.id]
     assert [c.shift for c in lineage] == ["transparent_objects", "harsh_lighting", "base"]
     assert [(u.dataset, u.version, u.tier, u.weight) for u in lineage[0].data] == [
-        ("grasp-base", 1, None, 0.5), ("clear", 2, 400, 0.5)]
+        ("grasp-base", 1, None, 0.5),
+        ("clear", 2, 400, 0.5),
+    ]
     assert lineage[1].data[1].hash == chain["data"][1].hash
     text = format_lineage(cat, "ckpt:harsh-clear")
     lines = text.splitlines()
@@ -80,8 +103,11 @@ def test_checkpoint_folder_is_a_model_repo(cat, chain, tmp_path):
     assert sorted(p.name for p in folder.iterdir()) == sorted([WEIGHTS_FILE, CONFIG_FILE, CARD_FILE])
     # the id: sha256(weights bytes, NUL, compact sorted config JSON), as nsl.learners defines it
     config = json.loads((folder / CONFIG_FILE).read_text())
-    expected = hashlib.sha256((folder / WEIGHTS_FILE).read_bytes() + b"\0"
-                              + json.dumps(config, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+    expected = hashlib.sha256(
+        (folder / WEIGHTS_FILE).read_bytes()
+        + b"\0"
+        + json.dumps(config, sort_keys=True, separators=(",", ":")).encode()
+    ).hexdigest()
     assert clear.id == expected == folder_checkpoint_id(folder) == checkpoint_id(folder / WEIGHTS_FILE, config)
     assert load_file(folder / WEIGHTS_FILE)["head.bias"].tolist() == [2.0, 3.0, 4.0, 5.0]
     assert json.loads((folder / CONFIG_FILE).read_text())["train"]["name"] == "harsh-clear"
@@ -126,8 +152,11 @@ def test_best_follows_the_evaluations(cat, tmp_path):
     uses = [cat.resolve_data("data:harsh").use()]
     ck = [make_checkpoint(cat, tmp_path, "harsh", step, float(step), data=uses) for step in (1000, 2000, 3000)]
     assert ck[0].shift == "harsh_lighting"  # from the last dataset it was trained on
-    with pytest.raises(UnknownReferenceError, match=r"no checkpoint of 'harsh' has an evaluation on shift "
-                                                    r"'harsh_lighting'; run `nsl eval"):
+    with pytest.raises(
+        UnknownReferenceError,
+        match=r"no checkpoint of 'harsh' has an evaluation on shift "
+        r"'harsh_lighting'; run `nsl eval",
+    ):
         cat.resolve_checkpoint("ckpt:harsh@best")
     cat.add_evaluation(ck[0].id, "harsh_lighting", episodes=100, successes=40, seed=0)
     cat.add_evaluation(ck[1].id, "harsh_lighting", episodes=100, successes=55, seed=0)

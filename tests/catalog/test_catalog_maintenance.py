@@ -7,12 +7,11 @@ import time
 from pathlib import Path
 
 import pytest
+from catalog_factories import make_checkpoint, make_dataset, manifest_hasher
 
 from nsl import workspace
 from nsl.catalog import CONFIG_FILE, WEIGHTS_FILE, Catalog, format_lineage, gc_apply, gc_plan, remove, verify
 from nsl.errors import ConfigError, CorruptDataError
-
-from catalog_factories import make_checkpoint, make_dataset, manifest_hasher
 
 
 @pytest.fixture
@@ -66,8 +65,11 @@ def test_rm_refuses_dependents_unless_forced(cat, tmp_path):
     child = make_checkpoint(cat, tmp_path, "harsh", 10, 1.0, parent=base.id)
     cat.add_evaluation(base.id, "base", episodes=10, successes=7, seed=0)
     cat.tag("prod", base.id)
-    with pytest.raises(ConfigError, match=r"ckpt:base@100 .* has dependents: 1 child checkpoint\(s\) \(harsh@10\); "
-                                          r"1 evaluation\(s\); tag\(s\) prod; .* --force"):
+    with pytest.raises(
+        ConfigError,
+        match=r"ckpt:base@100 .* has dependents: 1 child checkpoint\(s\) \(harsh@10\); "
+        r"1 evaluation\(s\); tag\(s\) prod; .* --force",
+    ):
         remove(cat, "ckpt:base")
     with pytest.raises(ConfigError, match=r"data:grasp-base@v1 was used to train 1 checkpoint\(s\) \(base@100\)"):
         remove(cat, "data:grasp-base@v1")
@@ -107,8 +109,11 @@ def test_gc_removes_only_unreferenced_and_stale_files(cat, tmp_path):
     for p in (orphan, stale_tmp, half_written, unregistered, staging):
         _age(p)
     plan = {item.path: item.reason for item in gc_plan(cat)}
-    assert plan == {orphan: "unregistered checkpoint folder", stale_tmp: "stale temporary folder",
-                    half_written: "stale temporary file"}
+    assert plan == {
+        orphan: "unregistered checkpoint folder",
+        stale_tmp: "stale temporary folder",
+        half_written: "stale temporary file",
+    }
     assert fresh in {i.path for i in gc_plan(cat, min_age=0)}
     assert gc_apply(gc_plan(cat)) == 100 + 10 + len("partial")
     assert not any(p.exists() for p in plan)

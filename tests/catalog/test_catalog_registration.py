@@ -9,13 +9,12 @@ import os
 from pathlib import Path
 
 import pytest
+from catalog_factories import make_dataset, weights_file
 
 from nsl import checkpoint_format, workspace
 from nsl.catalog import CONFIG_FILE, WEIGHTS_FILE, Catalog, folder_checkpoint_id
 from nsl.errors import ConfigError, UnknownReferenceError
 from tests.conftest import run_cli
-
-from catalog_factories import make_dataset, weights_file
 
 SHIPPED = workspace.shipped_base_dir()
 
@@ -82,7 +81,8 @@ def test_ckpt_base_is_the_shipped_base_with_its_recorded_data(cat):
     assert entry.name == "base" and entry.parent is None and entry.shift == "base"
     assert entry.id == folder_checkpoint_id(SHIPPED)
     assert [(u.dataset, u.version, u.weight, u.hash) for u in entry.data] == [
-        (d["dataset"], d["version"], d["weight"], d["hash"]) for d in record["data"]]
+        (d["dataset"], d["version"], d["weight"], d["hash"]) for d in record["data"]
+    ]
     assert (Path(entry.path) / WEIGHTS_FILE).read_bytes() == (SHIPPED / WEIGHTS_FILE).read_bytes()
     assert cat.resolve_checkpoint("ckpt:base@latest") == entry and len(cat.checkpoints()) == 1
     assert cat.checkpoint(f"ckpt:base@{entry.step}") == entry
@@ -98,8 +98,10 @@ def test_catalog_commands_know_ckpt_base_in_an_empty_workspace(command, capsys):
     if command == ["lineage"]:
         for d in record["data"]:
             tier = f":{d['tier']}" if d.get("tier") else ""  # a first-K view of the dataset
-            assert f"data: {d['dataset']}@v{d['version']}{tier} (not in this catalog, content {d['hash'][7:19]}), " \
-                   f"weight {d['weight']:g}" in out
+            assert (
+                f"data: {d['dataset']}@v{d['version']}{tier} (not in this catalog, content {d['hash'][7:19]}), "
+                f"weight {d['weight']:g}" in out
+            )
         assert "data: none recorded" not in out
 
 
@@ -110,8 +112,22 @@ def test_without_a_shipped_base_ckpt_base_is_unknown(cat, monkeypatch, tmp_path)
 
 
 def test_training_again_under_a_new_name_adds_an_alias_and_shares_the_weights(capsys):
-    assert run_cli("collect", "--shift", "base", "--episodes", "4", "--policy", "oracle:0.5", "--data", "tiny",
-                   "--batch-size", "4") == 0
+    assert (
+        run_cli(
+            "collect",
+            "--shift",
+            "base",
+            "--episodes",
+            "4",
+            "--policy",
+            "oracle:0.5",
+            "--data",
+            "tiny",
+            "--batch-size",
+            "4",
+        )
+        == 0
+    )
     train = ("train", "--data", "tiny", "--steps", "2", "--batch-size", "8", "--seed", "3")
     assert run_cli(*train, "--name", "first") == 0
     assert run_cli(*train, "--name", "second") == 0  # same data, seed and parent: the same weights

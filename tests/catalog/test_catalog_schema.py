@@ -5,13 +5,12 @@ from __future__ import annotations
 import sqlite3
 
 import pytest
+from catalog_factories import make_dataset
 
 from nsl import workspace
 from nsl.catalog import MIGRATIONS, SCHEMA_VERSION, Catalog
 from nsl.catalog.schema import APPLICATION_ID, connect
 from nsl.errors import CorruptDataError, IncompatibleVersionError
-
-from catalog_factories import make_dataset
 
 
 def test_new_catalog_is_wal_with_schema_version():
@@ -54,9 +53,11 @@ def test_newer_schema_is_refused():
     con = sqlite3.connect(workspace.catalog_path())
     con.execute(f"PRAGMA user_version = {SCHEMA_VERSION + 1}")
     con.close()
-    with pytest.raises(IncompatibleVersionError,
-                       match=rf"schema version {SCHEMA_VERSION + 1}, but this nsl reads versions up to "
-                             rf"{SCHEMA_VERSION}; upgrade nsl"):
+    with pytest.raises(
+        IncompatibleVersionError,
+        match=rf"schema version {SCHEMA_VERSION + 1}, but this nsl reads versions up to "
+        rf"{SCHEMA_VERSION}; upgrade nsl",
+    ):
         Catalog()
 
 

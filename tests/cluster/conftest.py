@@ -19,8 +19,11 @@ import pytest
 
 NODE_MEMORY = 100 * 1024 * 1024  # object store per node: 200 MB for the cluster
 # A killed node is declared dead after ~1 s instead of the default ~15 s.
-FAST_FAILURE_DETECTION = {"health_check_initial_delay_ms": 0, "health_check_period_ms": 500,
-                          "health_check_failure_threshold": 2}
+FAST_FAILURE_DETECTION = {
+    "health_check_initial_delay_ms": 0,
+    "health_check_period_ms": 500,
+    "health_check_failure_threshold": 2,
+}
 
 
 @pytest.fixture
@@ -29,9 +32,15 @@ def ray_cluster():
     import ray
     from ray.cluster_utils import Cluster
 
-    cluster = Cluster(initialize_head=True, head_node_args={
-        "num_cpus": 1, "object_store_memory": NODE_MEMORY, "include_dashboard": False,
-        "_system_config": FAST_FAILURE_DETECTION})
+    cluster = Cluster(
+        initialize_head=True,
+        head_node_args={
+            "num_cpus": 1,
+            "object_store_memory": NODE_MEMORY,
+            "include_dashboard": False,
+            "_system_config": FAST_FAILURE_DETECTION,
+        },
+    )
     try:
         worker = cluster.add_node(num_cpus=1, object_store_memory=NODE_MEMORY)
         ray.init(address=cluster.address, logging_level="WARNING")

@@ -20,10 +20,33 @@ from tests.conftest import run_cli
 ROOT = Path(__file__).resolve().parents[2]
 
 # 16 episodes in chunks of 2: eight one-chunk Ray tasks over the two nodes
-COLLECT = ["collect", "--shift", "harsh_lighting", "--episodes", "16", "--policy", "oracle:0.5", "--batch-size", "2",
-           "--episodes-per-file", "5", "--seed", "3"]
-EVAL = ["eval", "--policy", "oracle:0.5", "--shift", "base,checkerboard_backing", "--episodes", "16", "--batch-size", "2",
-        "--json"]
+COLLECT = [
+    "collect",
+    "--shift",
+    "harsh_lighting",
+    "--episodes",
+    "16",
+    "--policy",
+    "oracle:0.5",
+    "--batch-size",
+    "2",
+    "--episodes-per-file",
+    "5",
+    "--seed",
+    "3",
+]
+EVAL = [
+    "eval",
+    "--policy",
+    "oracle:0.5",
+    "--shift",
+    "base,checkerboard_backing",
+    "--episodes",
+    "16",
+    "--batch-size",
+    "2",
+    "--json",
+]
 
 
 def test_collect_and_eval_on_two_nodes_match_local(ray_cluster, capsys):
@@ -48,10 +71,15 @@ def test_collect_and_eval_on_two_nodes_match_local(ray_cluster, capsys):
     assert ray_eval == local_eval and set(ray_eval) == {"base", "checkerboard_backing"}
 
     cluster, worker = ray_cluster  # every listener of the cluster is on loopback
-    processes = [info.process for node in (cluster.head_node, worker) for infos in node.all_processes.values()
-                 for info in infos]
-    listening = {c.laddr.ip for p in processes for c in psutil.Process(p.pid).net_connections("inet")
-                 if c.status == psutil.CONN_LISTEN}
+    processes = [
+        info.process for node in (cluster.head_node, worker) for infos in node.all_processes.values() for info in infos
+    ]
+    listening = {
+        c.laddr.ip
+        for p in processes
+        for c in psutil.Process(p.pid).net_connections("inet")
+        if c.status == psutil.CONN_LISTEN
+    }
     assert listening and listening <= {"127.0.0.1", "::ffff:127.0.0.1"}
 
 
@@ -124,8 +152,9 @@ def test_a_node_lost_mid_chunk_changes_nothing(ray_cluster, tmp_path):
     executor = RayExecutor("ray")
     runner = executor.runner
     runner.chunks_per_task = 1  # 12 tasks of 2 episodes
-    episodes = list(collect_episodes(config, _SlowOnNode(worker.node_id, str(flag)), range(n), seed=5, batch=2,
-                                     runner=runner))
+    episodes = list(
+        collect_episodes(config, _SlowOnNode(worker.node_id, str(flag)), range(n), seed=5, batch=2, runner=runner)
+    )
     killer.join()
     executor.close()
 
@@ -140,8 +169,18 @@ def test_a_node_lost_mid_chunk_changes_nothing(ray_cluster, tmp_path):
 
 @pytest.mark.slow  # torch and a checkpoint load in the Ray workers of both nodes
 def test_checkpoint_policy_evaluates_the_same_on_two_nodes(ray_cluster, capsys):
-    argv = ["eval", "--checkpoint", "base", "--shift", "base,harsh_lighting", "--episodes", "16", "--batch-size", "4",
-            "--json"]
+    argv = [
+        "eval",
+        "--checkpoint",
+        "base",
+        "--shift",
+        "base,harsh_lighting",
+        "--episodes",
+        "16",
+        "--batch-size",
+        "4",
+        "--json",
+    ]
     assert run_cli(*argv) == 0
     local = json.loads(capsys.readouterr().out)["results"]
     assert run_cli(*argv, "--cluster", "ray") == 0
@@ -151,11 +190,26 @@ def test_checkpoint_policy_evaluates_the_same_on_two_nodes(ray_cluster, capsys):
 @pytest.mark.slow  # a second driver process connects to the cluster
 def test_a_killed_driver_resumes_to_the_same_hash(ray_cluster):
     cluster, _ = ray_cluster
-    argv = ["collect", "--shift", "base", "--episodes", "48", "--policy", "oracle:0.5", "--episodes-per-file", "4",
-            "--cluster", "ray"]
-    proc = subprocess.Popen([sys.executable, "-m", "nsl", *argv, "--data", "killed"], cwd=ROOT,
-                            env={**os.environ, "RAY_ADDRESS": cluster.address}, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+    argv = [
+        "collect",
+        "--shift",
+        "base",
+        "--episodes",
+        "48",
+        "--policy",
+        "oracle:0.5",
+        "--episodes-per-file",
+        "4",
+        "--cluster",
+        "ray",
+    ]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "nsl", *argv, "--data", "killed"],
+        cwd=ROOT,
+        env={**os.environ, "RAY_ADDRESS": cluster.address},
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     staged = api.dataset_root("killed") / ".staging/data/chunk-000/file-000.parquet"
     try:
         deadline = time.time() + 180

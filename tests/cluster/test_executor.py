@@ -25,8 +25,11 @@ def setup_module(module) -> None:
 def test_cluster_spec_comes_from_the_option_then_the_environment(monkeypatch):
     monkeypatch.delenv("NSL_CLUSTER", raising=False)
     assert parse_cluster(None) == "local"
-    assert [parse_cluster(s) for s in ("ray", "auto", "ray://10.0.0.1:10001")] == ["ray", "auto",
-                                                                                  "ray://10.0.0.1:10001"]
+    assert [parse_cluster(s) for s in ("ray", "auto", "ray://10.0.0.1:10001")] == [
+        "ray",
+        "auto",
+        "ray://10.0.0.1:10001",
+    ]
     monkeypatch.setenv("NSL_CLUSTER", "ray")
     assert parse_cluster(None) == "ray" and parse_cluster("local") == "local"
     monkeypatch.setenv("NSL_CLUSTER", "slurm")
@@ -38,13 +41,18 @@ def test_cluster_spec_comes_from_the_option_then_the_environment(monkeypatch):
 
 def test_without_ray_cluster_commands_fail_in_one_line_saying_how_to_install(monkeypatch, capsys):
     monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` now fails as if Ray were not installed
-    with pytest.raises(EnvironmentSetupError, match=r"needs Ray, which is not installed; install it with "
-                                                    r"`pip install 'nsl\[ray\]'`"):
+    with pytest.raises(
+        EnvironmentSetupError,
+        match=r"needs Ray, which is not installed; install it with "
+        r"`pip install 'nsl\[ray\]'`",
+    ):
         open_executor("ray")
     assert run_cli(*COLLECT, "--cluster", "ray") == 2
     err = capsys.readouterr().err.strip()
-    assert err == ("nsl: error: --cluster ray needs Ray, which is not installed; install it with "
-                   "`pip install 'nsl[ray]'` (in a checkout: `pip install -e '.[ray]'`)")
+    assert err == (
+        "nsl: error: --cluster ray needs Ray, which is not installed; install it with "
+        "`pip install 'nsl[ray]'` (in a checkout: `pip install -e '.[ray]'`)"
+    )
     monkeypatch.setenv("NSL_CLUSTER", "auto")
     assert run_cli("eval", "--policy", "random", "--episodes", "2") == 2
     assert capsys.readouterr().err.strip().startswith("nsl: error: --cluster auto needs Ray")
@@ -91,7 +99,8 @@ def test_units_run_as_ray_tasks_on_both_nodes_and_need_the_shared_workspace(ray_
     with open_executor("ray") as ex:
         assert ex.describe()["nodes"] == 2 and ex.cpus() == 2
         assert dict(ex.run_units(Unit(f"sq{i}", _square, (i,), num_cpus=1) for i in range(6))) == {
-            f"sq{i}": i * i for i in range(6)}
+            f"sq{i}": i * i for i in range(6)
+        }
         out = dict(ex.run_units(Unit(f"u{i}", functools.partial(_node_and_home, f"u{i}")) for i in range(4)))
         nodes = {node for node, _ in out.values()}
         assert nodes == {cluster.head_node.node_id, worker.node_id}
@@ -110,8 +119,11 @@ def test_units_run_as_ray_tasks_on_both_nodes_and_need_the_shared_workspace(ray_
     with open_executor("ray") as ex:  # a node with its own (unshared) NSL_HOME does not see the driver's marker
         ex._shared_marker().unlink()
         ex.submit(Unit("train", _square, (2,)))
-        with pytest.raises(UnitFailed, match=r"unit train failed: NSL_HOME .* of the driver is not visible on node "
-                                             r".*; mount the same shared folder"):
+        with pytest.raises(
+            UnitFailed,
+            match=r"unit train failed: NSL_HOME .* of the driver is not visible on node "
+            r".*; mount the same shared folder",
+        ):
             ex.wait()
 
 
@@ -119,10 +131,13 @@ def test_the_five_folders_take_a_runner_and_never_import_the_cluster_package():
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[2]
-    imports = re.compile(r"^\s*(from\s+nsl\.cluster|import\s+nsl\.cluster|from\s+nsl\s+import\s+.*\bcluster\b)",
-                         re.M)
-    offenders = [str(f.relative_to(root)) for folder in ("collectors", "datasets", "learners", "eval", "catalog")
-                 for f in (root / folder).rglob("*.py") if imports.search(f.read_text())]
+    imports = re.compile(r"^\s*(from\s+nsl\.cluster|import\s+nsl\.cluster|from\s+nsl\s+import\s+.*\bcluster\b)", re.M)
+    offenders = [
+        str(f.relative_to(root))
+        for folder in ("collectors", "datasets", "learners", "eval", "catalog")
+        for f in (root / folder).rglob("*.py")
+        if imports.search(f.read_text())
+    ]
     assert offenders == []
     import inspect
 

@@ -18,9 +18,11 @@ def test_render_all_writes_one_row_per_shift(tmp_path):
 
 
 def test_bad_input_is_one_line_and_nonzero(tmp_path):
-    for args, needle in [(["render", "--shift", "harsh", "--out", str(tmp_path / "x.png")], "unknown shift 'harsh'"),
-                         (["render", "--image-size", "0", "--out", str(tmp_path / "x.png")], "image_size 0"),
-                         (["eval", "--policy", "orcale", "--episodes", "1"], "unknown policy 'orcale'")]:
+    for args, needle in [
+        (["render", "--shift", "harsh", "--out", str(tmp_path / "x.png")], "unknown shift 'harsh'"),
+        (["render", "--image-size", "0", "--out", str(tmp_path / "x.png")], "image_size 0"),
+        (["eval", "--policy", "orcale", "--episodes", "1"], "unknown policy 'orcale'"),
+    ]:
         r = subprocess.run([sys.executable, "-m", "nsl", *args], capture_output=True, text=True, timeout=120)
         assert r.returncode == 2, r.stderr
         lines = [ln for ln in r.stderr.splitlines() if ln.startswith("nsl: error:")]

@@ -147,15 +147,18 @@ def test_wrist_camera_rides_with_the_gripper_and_the_shoulder_camera_stays():
     assert EnvConfig().camera == "wrist" and EnvConfig().to_dict()["env_version"] == "nsl-grasp-v3"
 
 
-@pytest.mark.parametrize("kwargs,match", [
-    ({"image_size": 0}, "image_size 0 is out of range"),
-    ({"shift": "bogus"}, "unknown shift 'bogus'"),
-    ({"shift": "harsh_lighting@4"}, "out of range"),
-    ({"control": "joystick"}, "control mode 'joystick' is unknown"),
-    ({"horizon": 30}, "at most 20 steps"),
-    ({"split": "val"}, "split 'val'"),
-    ({"camera": "overhead"}, "camera 'overhead' is unknown"),
-])
+@pytest.mark.parametrize(
+    "kwargs,match",
+    [
+        ({"image_size": 0}, "image_size 0 is out of range"),
+        ({"shift": "bogus"}, "unknown shift 'bogus'"),
+        ({"shift": "harsh_lighting@4"}, "out of range"),
+        ({"control": "joystick"}, "control mode 'joystick' is unknown"),
+        ({"horizon": 30}, "at most 20 steps"),
+        ({"split": "val"}, "split 'val'"),
+        ({"camera": "overhead"}, "camera 'overhead' is unknown"),
+    ],
+)
 def test_bad_configs_get_one_line_errors(kwargs, match):
     with pytest.raises(Exception, match=match) as e:
         EnvConfig(**kwargs)

@@ -24,21 +24,25 @@ def test_gym_id_matches_the_environment_version():
 
 
 def test_registration_does_not_import_mujoco():
-    code = ("import sys, gymnasium, nsl.collectors\n"
-            f"assert {GYM_ID!r} in gymnasium.registry\n"
-            "print(sorted(m for m in ('mujoco', 'torch') if m in sys.modules))\n"
-            f"env = gymnasium.make({GYM_ID!r}, shift='offset_gripper', render_mode='rgb_array')\n"
-            "assert 'mujoco' in sys.modules and env.unwrapped.config.shift == 'offset_gripper'")
+    code = (
+        "import sys, gymnasium, nsl.collectors\n"
+        f"assert {GYM_ID!r} in gymnasium.registry\n"
+        "print(sorted(m for m in ('mujoco', 'torch') if m in sys.modules))\n"
+        f"env = gymnasium.make({GYM_ID!r}, shift='offset_gripper', render_mode='rgb_array')\n"
+        "assert 'mujoco' in sys.modules and env.unwrapped.config.shift == 'offset_gripper'"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
 
 
 def test_make_imports_nsl_collectors_itself():
-    code = ("import gymnasium\n"
-            f"env = gymnasium.make('nsl.collectors:{GYM_ID}', shift='transparent_objects')\n"
-            "obs, _ = env.reset(seed=1)\n"
-            "print(env.spec.id, env.unwrapped.config.shift, obs['image'].shape)")
+    code = (
+        "import gymnasium\n"
+        f"env = gymnasium.make('nsl.collectors:{GYM_ID}', shift='transparent_objects')\n"
+        "obs, _ = env.reset(seed=1)\n"
+        "print(env.spec.id, env.unwrapped.config.shift, obs['image'].shape)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == [GYM_ID, "transparent_objects", "(64,", "64,", "3)"]

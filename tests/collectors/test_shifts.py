@@ -13,8 +13,13 @@ from nsl.errors import ConfigError, IncompatibleVersionError, UnknownReferenceEr
 def frames():
     """First frames of the same four scenes under each shift, from the fixed shoulder camera (whole bin)."""
     out = {}
-    for name in ["base", "harsh_lighting", "checkerboard_backing", "transparent_objects",
-                 "harsh_lighting+checkerboard_backing"]:
+    for name in [
+        "base",
+        "harsh_lighting",
+        "checkerboard_backing",
+        "transparent_objects",
+        "harsh_lighting+checkerboard_backing",
+    ]:
         env = GraspEnv(EnvConfig(shift=name, camera="shoulder"))
         out[name] = np.stack([env.reset(seed=s)[0]["image"] for s in range(4)]).astype(np.float64)
         env.close()
@@ -41,6 +46,7 @@ def test_checkerboard_adds_black_and_white_squares(frames):
 
 def test_the_wrist_camera_sees_the_shifts_too():
     """The default wrist camera looks at the floor below the fingers: the checkerboard and the light show there."""
+
     def first_frames(shift):
         env = GraspEnv(EnvConfig(shift=shift))
         out = np.stack([env.reset(seed=s)[0]["image"] for s in range(4)]).astype(np.float64)
@@ -69,8 +75,9 @@ def test_transparent_objects_are_nearly_clear(frames):
     env.close()
     # Opaque coloured objects stand out from the floor; clear ones barely do.
     diff_base = np.abs(frames["base"] - frames["base"].mean(axis=(1, 2), keepdims=True)).mean()
-    diff_clear = np.abs(frames["transparent_objects"] - frames["transparent_objects"].mean(axis=(1, 2),
-                                                                                          keepdims=True)).mean()
+    diff_clear = np.abs(
+        frames["transparent_objects"] - frames["transparent_objects"].mean(axis=(1, 2), keepdims=True)
+    ).mean()
     assert diff_clear < diff_base
 
 
@@ -90,7 +97,9 @@ def test_extend_gripper_makes_fingers_longer_and_narrower():
         assert e.size[1] < b.size[1]  # narrower
         tip_b, tip_e = b.pos[2] - b.size[2], e.pos[2] - e.size[2]
         assert tip_e == pytest.approx(tip_b - 0.01)  # the tips reach 1 cm further down
-    assert _model("extend_gripper@2").geom("finger_left").size[2] * 2 == pytest.approx(base.geom("finger_left").size[2] * 2 + 0.02)
+    assert _model("extend_gripper@2").geom("finger_left").size[2] * 2 == pytest.approx(
+        base.geom("finger_left").size[2] * 2 + 0.02
+    )
 
 
 def test_offset_gripper_moves_fingers_10cm_from_the_wrist():
@@ -121,11 +130,14 @@ def test_study_list_is_base_and_the_five_at_their_calibrated_severities():
     assert parse_shift_list("harsh_lighting@2")[0] == specs[1] and specs[1].name == "harsh_lighting@2"
 
 
-@pytest.mark.parametrize("text,error,match", [
-    ("harsh_lightning", UnknownReferenceError, "did you mean 'harsh_lighting'"),
-    ("offset_gripper@7", ConfigError, r"out of range; use a value in \[0, 2.0\]"),
-    ("offset_gripper@far", ConfigError, "not a number"),
-])
+@pytest.mark.parametrize(
+    "text,error,match",
+    [
+        ("harsh_lightning", UnknownReferenceError, "did you mean 'harsh_lighting'"),
+        ("offset_gripper@7", ConfigError, r"out of range; use a value in \[0, 2.0\]"),
+        ("offset_gripper@far", ConfigError, "not a number"),
+    ],
+)
 def test_bad_shift_specs(text, error, match):
     with pytest.raises(error, match=match):
         parse_shift(text)

@@ -23,18 +23,62 @@ def pipeline(home, monkeypatch):
     """Small base and shifted datasets and a tiny pre-trained checkpoint, built once per module."""
     monkeypatch.setenv("NSL_HOME", str(home))
     if not (home / "runs" / "base-tiny").exists():
-        assert run_cli("collect", "--shift", "base", "--episodes", "24", "--policy", "oracle:0.5",
-                       "--data", "grasp-base", "--batch-size", "4") == 0
-        assert run_cli("collect", "--shift", "harsh_lighting", "--episodes", "12", "--policy", "oracle:0.5",
-                       "--data", "grasp-harsh", "--batch-size", "4") == 0
-        assert run_cli("train", "--data", "grasp-base", "--steps", "8", "--name", "base-tiny",
-                       "--checkpoint-every", "4") == 0
+        assert (
+            run_cli(
+                "collect",
+                "--shift",
+                "base",
+                "--episodes",
+                "24",
+                "--policy",
+                "oracle:0.5",
+                "--data",
+                "grasp-base",
+                "--batch-size",
+                "4",
+            )
+            == 0
+        )
+        assert (
+            run_cli(
+                "collect",
+                "--shift",
+                "harsh_lighting",
+                "--episodes",
+                "12",
+                "--policy",
+                "oracle:0.5",
+                "--data",
+                "grasp-harsh",
+                "--batch-size",
+                "4",
+            )
+            == 0
+        )
+        assert (
+            run_cli("train", "--data", "grasp-base", "--steps", "8", "--name", "base-tiny", "--checkpoint-every", "4")
+            == 0
+        )
     return home
 
 
 def test_fine_tuning_chain_is_catalogued_with_lineage(pipeline, capsys):
-    assert run_cli("train", "--data", "grasp-base=0.5", "--data", "grasp-harsh=0.5", "--init", "ckpt:base-tiny",
-                   "--steps", "6", "--name", "harsh-tiny") == 0
+    assert (
+        run_cli(
+            "train",
+            "--data",
+            "grasp-base=0.5",
+            "--data",
+            "grasp-harsh=0.5",
+            "--init",
+            "ckpt:base-tiny",
+            "--steps",
+            "6",
+            "--name",
+            "harsh-tiny",
+        )
+        == 0
+    )
     with Catalog() as cat:
         child = cat.resolve_checkpoint("ckpt:harsh-tiny@latest")
         parent = cat.resolve_checkpoint("ckpt:base-tiny@latest")
@@ -52,11 +96,40 @@ def test_fine_tuning_chain_is_catalogued_with_lineage(pipeline, capsys):
 
 
 def test_checkpoint_policy_collects_and_evaluations_are_stored(pipeline, capsys):
-    assert run_cli("collect", "--shift", "harsh_lighting", "--episodes", "4", "--policy", "ckpt:base-tiny",
-                   "--data", "grasp-harsh-explore", "--batch-size", "4", "--epsilon", "0.2") == 0
+    assert (
+        run_cli(
+            "collect",
+            "--shift",
+            "harsh_lighting",
+            "--episodes",
+            "4",
+            "--policy",
+            "ckpt:base-tiny",
+            "--data",
+            "grasp-harsh-explore",
+            "--batch-size",
+            "4",
+            "--epsilon",
+            "0.2",
+        )
+        == 0
+    )
     capsys.readouterr()
-    assert run_cli("eval", "--checkpoint", "ckpt:base-tiny", "--shift", "base,harsh_lighting", "--episodes", "4",
-                   "--batch-size", "4", "--json") == 0
+    assert (
+        run_cli(
+            "eval",
+            "--checkpoint",
+            "ckpt:base-tiny",
+            "--shift",
+            "base,harsh_lighting",
+            "--episodes",
+            "4",
+            "--batch-size",
+            "4",
+            "--json",
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert set(out["results"]) == {"base", "harsh_lighting"}
     with Catalog() as cat:
@@ -68,28 +141,86 @@ def test_checkpoint_policy_collects_and_evaluations_are_stored(pipeline, capsys)
 def test_action_noise_is_recorded_with_the_data_and_refused_for_scripted_policies(pipeline):
     from nsl.datasets import api
 
-    assert run_cli("collect", "--shift", "offset_gripper@0.25", "--episodes", "2", "--policy", "ckpt:base-tiny",
-                   "--data", "offset-noisy", "--batch-size", "2", "--action-noise", "0.3") == 0
+    assert (
+        run_cli(
+            "collect",
+            "--shift",
+            "offset_gripper@0.25",
+            "--episodes",
+            "2",
+            "--policy",
+            "ckpt:base-tiny",
+            "--data",
+            "offset-noisy",
+            "--batch-size",
+            "2",
+            "--action-noise",
+            "0.3",
+        )
+        == 0
+    )
     v = api.open_version("offset-noisy")
     spec = v.provenance["collections"][-1]["spec"]
     assert spec["policy"]["action_noise"] == 0.3 and spec["policy"]["epsilon"] == 0.0
     assert "--action-noise 0.3" in v.manifest["created"]["command"]
     with pytest.raises(ConfigError, match="--action-noise applies to checkpoint policies"):
-        run_cli("--debug", "collect", "--shift", "base", "--episodes", "2", "--policy", "oracle:0.5",
-                "--data", "oracle-noisy", "--action-noise", "0.3")
+        run_cli(
+            "--debug",
+            "collect",
+            "--shift",
+            "base",
+            "--episodes",
+            "2",
+            "--policy",
+            "oracle:0.5",
+            "--data",
+            "oracle-noisy",
+            "--action-noise",
+            "0.3",
+        )
 
 
 def test_continual_rejects_bad_sequences_before_any_work(pipeline):
     before = sorted(p.name for p in (pipeline / "datasets").iterdir())
     with pytest.raises(UnknownReferenceError, match="unknown shift 'harsh'"):
-        run_cli("--debug", "continual", "--sequence", "harsh_lighting,harsh", "--init", "ckpt:base-tiny",
-                "--base-data", "grasp-base", "--name", "bad1")
+        run_cli(
+            "--debug",
+            "continual",
+            "--sequence",
+            "harsh_lighting,harsh",
+            "--init",
+            "ckpt:base-tiny",
+            "--base-data",
+            "grasp-base",
+            "--name",
+            "bad1",
+        )
     with pytest.raises(UnknownReferenceError, match="nope"):
-        run_cli("--debug", "continual", "--sequence", "harsh_lighting", "--init", "ckpt:nope",
-                "--base-data", "grasp-base", "--name", "bad2")
+        run_cli(
+            "--debug",
+            "continual",
+            "--sequence",
+            "harsh_lighting",
+            "--init",
+            "ckpt:nope",
+            "--base-data",
+            "grasp-base",
+            "--name",
+            "bad2",
+        )
     with pytest.raises(ConfigError, match="repeats a task"):
-        run_cli("--debug", "continual", "--sequence", "harsh_lighting,harsh_lighting", "--init", "ckpt:base-tiny",
-                "--base-data", "grasp-base", "--name", "bad3")
+        run_cli(
+            "--debug",
+            "continual",
+            "--sequence",
+            "harsh_lighting,harsh_lighting",
+            "--init",
+            "ckpt:base-tiny",
+            "--base-data",
+            "grasp-base",
+            "--name",
+            "bad3",
+        )
     assert sorted(p.name for p in (pipeline / "datasets").iterdir()) == before
     assert not (pipeline / "runs" / "bad1").exists()
 
@@ -97,9 +228,23 @@ def test_continual_rejects_bad_sequences_before_any_work(pipeline):
 def test_continual_resumes_at_the_interrupted_stage(pipeline, monkeypatch, capsys):
     import nsl.services.continual as continual
 
-    args = ["continual", "--sequence", "checkerboard_backing,extend_gripper,offset_gripper", "--init",
-            "ckpt:base-tiny", "--base-data", "grasp-base", "--episodes", "4", "--steps", "4", "--eval-episodes", "2",
-            "--name", "cont"]
+    args = [
+        "continual",
+        "--sequence",
+        "checkerboard_backing,extend_gripper,offset_gripper",
+        "--init",
+        "ckpt:base-tiny",
+        "--base-data",
+        "grasp-base",
+        "--episodes",
+        "4",
+        "--steps",
+        "4",
+        "--eval-episodes",
+        "2",
+        "--name",
+        "cont",
+    ]
     real_stage = continual._stage
     calls: list[int] = []
 
@@ -136,14 +281,33 @@ def test_bench_eval_reports_both_worker_counts(capsys):
 
 
 def test_pre_training_takes_an_architecture_and_refuses_bad_ones(pipeline, capsys):
-    assert run_cli("train", "--data", "grasp-base", "--steps", "2", "--name", "spatial-tiny",
-                   "--net", "pool=spatial", "--net", "hidden=16", "--net", "action_dims=0,1,3") == 0
+    assert (
+        run_cli(
+            "train",
+            "--data",
+            "grasp-base",
+            "--steps",
+            "2",
+            "--name",
+            "spatial-tiny",
+            "--net",
+            "pool=spatial",
+            "--net",
+            "hidden=16",
+            "--net",
+            "action_dims=0,1,3",
+        )
+        == 0
+    )
     with Catalog() as cat:
         entry = cat.resolve_checkpoint("ckpt:spatial-tiny@latest")
     arch = json.loads((Path(entry.path) / "config.json").read_text())["architecture"]
     assert (arch["pool"], arch["hidden"], arch["action_dims"]) == ("spatial", 16, [0, 1, 3])
-    for extra, message in ((["--net", "poool=max"], "FIELD=VALUE"), (["--net", "hidden=wide"], "not a valid hidden"),
-                           (["--init", "ckpt:base-tiny", "--net", "hidden=16"], "parent's is kept")):
+    for extra, message in (
+        (["--net", "poool=max"], "FIELD=VALUE"),
+        (["--net", "hidden=wide"], "not a valid hidden"),
+        (["--init", "ckpt:base-tiny", "--net", "hidden=16"], "parent's is kept"),
+    ):
         capsys.readouterr()
         assert run_cli("train", "--data", "grasp-base", "--steps", "2", "--name", "x", *extra) == 2
         err = capsys.readouterr().err.strip()
@@ -151,8 +315,24 @@ def test_pre_training_takes_an_architecture_and_refuses_bad_ones(pipeline, capsy
 
 
 def test_training_records_crop_and_n_step_and_refuses_data_from_an_older_environment(pipeline, capsys):
-    assert run_cli("train", "--data", "grasp-base", "--steps", "2", "--name", "crop-tiny", "--crop", "2",
-                   "--n-step", "3", "--weight-decay", "1e-4") == 0
+    assert (
+        run_cli(
+            "train",
+            "--data",
+            "grasp-base",
+            "--steps",
+            "2",
+            "--name",
+            "crop-tiny",
+            "--crop",
+            "2",
+            "--n-step",
+            "3",
+            "--weight-decay",
+            "1e-4",
+        )
+        == 0
+    )
     with Catalog() as cat:
         entry = cat.resolve_checkpoint("ckpt:crop-tiny@latest")
     config = json.loads((Path(entry.path) / "config.json").read_text())
@@ -161,13 +341,47 @@ def test_training_records_crop_and_n_step_and_refuses_data_from_an_older_environ
     assert training["weight_decay"] == 1e-4
     assert (config["data"]["n_step"], config["data"]["gamma"]) == (3, training["gamma"])
     # A fine-tune keeps how its parent read the data (n-step returns, crop) unless told otherwise.
-    assert run_cli("train", "--data", "grasp-base=0.5", "--data", "grasp-harsh=0.5", "--init", "ckpt:crop-tiny",
-                   "--steps", "2", "--name", "crop-tiny-ft") == 0
-    assert run_cli("train", "--data", "grasp-base=0.5", "--data", "grasp-harsh=0.5", "--init", "ckpt:crop-tiny",
-                   "--steps", "2", "--name", "crop-tiny-ft1", "--n-step", "1", "--crop", "4") == 0
+    assert (
+        run_cli(
+            "train",
+            "--data",
+            "grasp-base=0.5",
+            "--data",
+            "grasp-harsh=0.5",
+            "--init",
+            "ckpt:crop-tiny",
+            "--steps",
+            "2",
+            "--name",
+            "crop-tiny-ft",
+        )
+        == 0
+    )
+    assert (
+        run_cli(
+            "train",
+            "--data",
+            "grasp-base=0.5",
+            "--data",
+            "grasp-harsh=0.5",
+            "--init",
+            "ckpt:crop-tiny",
+            "--steps",
+            "2",
+            "--name",
+            "crop-tiny-ft1",
+            "--n-step",
+            "1",
+            "--crop",
+            "4",
+        )
+        == 0
+    )
     with Catalog() as cat:
-        kept, told = (json.loads((Path(cat.resolve_checkpoint(f"ckpt:{n}@latest").path) / "config.json").read_text())
-                      for n in ("crop-tiny-ft", "crop-tiny-ft1"))
+        kept, told = (
+            json.loads((Path(cat.resolve_checkpoint(f"ckpt:{n}@latest").path) / "config.json").read_text())
+            for n in ("crop-tiny-ft", "crop-tiny-ft1")
+        )
     assert (kept["training"]["n_step"], kept["training"]["augment_crop"], kept["data"]["n_step"]) == (3, 2, 3)
     assert (told["training"]["n_step"], told["training"]["augment_crop"], told["data"].get("n_step", 1)) == (1, 4, 1)
     capsys.readouterr()
@@ -181,6 +395,7 @@ def test_training_records_crop_and_n_step_and_refuses_data_from_an_older_environ
     src = workspace.datasets_dir() / "grasp-base"
     old = workspace.datasets_dir() / "grasp-old"
     import shutil
+
     shutil.copytree(src, old)
     for prov in old.glob("v*/meta/*.json"):
         text = prov.read_text()
@@ -193,14 +408,28 @@ def test_training_records_crop_and_n_step_and_refuses_data_from_an_older_environ
 
 
 def test_a_fine_tune_without_steps_or_conservative_takes_the_recipes_and_pre_training_must_give_steps(
-        pipeline, monkeypatch, capsys):
+    pipeline, monkeypatch, capsys
+):
     from nsl.commands import continual, efficiency
-    from nsl.learners import FINE_TUNE_CONSERVATIVE, config as learner_config
+    from nsl.learners import FINE_TUNE_CONSERVATIVE
+    from nsl.learners import config as learner_config
 
     recipe_steps = learner_config.FINE_TUNE_STEPS
     monkeypatch.setattr(learner_config, "FINE_TUNE_STEPS", 3)  # the recipe's 2,000, shortened for the test
-    assert run_cli("train", "--data", "grasp-base=0.5", "--data", "grasp-harsh=0.5", "--init", "ckpt:base-tiny",
-                   "--name", "recipe-tiny") == 0
+    assert (
+        run_cli(
+            "train",
+            "--data",
+            "grasp-base=0.5",
+            "--data",
+            "grasp-harsh=0.5",
+            "--init",
+            "ckpt:base-tiny",
+            "--name",
+            "recipe-tiny",
+        )
+        == 0
+    )
     with Catalog() as cat:
         entry = cat.resolve_checkpoint("ckpt:recipe-tiny@latest")
     training = json.loads((Path(entry.path) / "config.json").read_text())["training"]
@@ -211,6 +440,7 @@ def test_a_fine_tune_without_steps_or_conservative_takes_the_recipes_and_pre_tra
     assert "--steps is required for pre-training" in err and len(err.splitlines()) == 1, err
     # The commands that fine-tune in loops default to the recipe's steps too.
     import argparse
+
     from nsl.commands import train as train_command
 
     def subparser(command):
@@ -221,16 +451,41 @@ def test_a_fine_tune_without_steps_or_conservative_takes_the_recipes_and_pre_tra
     for command in (continual, efficiency):
         assert subparser(command).get_default("steps") == recipe_steps
     helps = {a.dest: a.help for a in subparser(train_command)._actions}  # what `nsl train --help` says
-    assert f"fine-tuning: {recipe_steps}" in helps["steps"] and f"{FINE_TUNE_CONSERVATIVE} for fine-tuning" in helps[
-        "conservative"]
+    assert (
+        f"fine-tuning: {recipe_steps}" in helps["steps"]
+        and f"{FINE_TUNE_CONSERVATIVE} for fine-tuning" in helps["conservative"]
+    )
 
 
 def test_td_criterion_chooses_a_step_by_held_out_td_error(pipeline, capsys):
     from nsl.eval import read_curve
 
-    assert run_cli("train", "--data", "grasp-base=0.5", "--data", "grasp-harsh=0.5", "--init", "ckpt:base-tiny",
-                   "--steps", "4", "--name", "td-tiny", "--eval-every", "2", "--eval-episodes", "0",
-                   "--criterion", "td", "--holdout", "0.25", "--patience", "3") == 0
+    assert (
+        run_cli(
+            "train",
+            "--data",
+            "grasp-base=0.5",
+            "--data",
+            "grasp-harsh=0.5",
+            "--init",
+            "ckpt:base-tiny",
+            "--steps",
+            "4",
+            "--name",
+            "td-tiny",
+            "--eval-every",
+            "2",
+            "--eval-episodes",
+            "0",
+            "--criterion",
+            "td",
+            "--holdout",
+            "0.25",
+            "--patience",
+            "3",
+        )
+        == 0
+    )
     run_dir = workspace.runs_dir() / "td-tiny"
     rows = read_curve(run_dir / "curve.csv")
     assert [r.step for r in rows] == [0, 2, 4]
@@ -253,8 +508,23 @@ def test_td_criterion_chooses_a_step_by_held_out_td_error(pipeline, capsys):
 def test_efficiency_writes_tiers_json_that_the_report_reads(pipeline, capsys):
     from nsl.eval import TierResults
 
-    args = ["efficiency", "--data", "grasp-harsh", "--sizes", "4,8,100", "--init", "ckpt:base-tiny",
-            "--base-data", "grasp-base", "--steps", "2", "--eval-episodes", "3", "--name", "eff"]
+    args = [
+        "efficiency",
+        "--data",
+        "grasp-harsh",
+        "--sizes",
+        "4,8,100",
+        "--init",
+        "ckpt:base-tiny",
+        "--base-data",
+        "grasp-base",
+        "--steps",
+        "2",
+        "--eval-episodes",
+        "3",
+        "--name",
+        "eff",
+    ]
     assert run_cli(*args) == 0
     run_dir = workspace.runs_dir() / "eff"
     tiers = TierResults.load(run_dir / "tiers.json")
@@ -285,12 +555,28 @@ def test_continual_reports_a_stage_error_once_and_debug_shows_it(pipeline, monke
         raise ConfigError(f"collection of {config.data} refused")
 
     monkeypatch.setattr(collect_command, "collect", failing_collect)
-    args = ["continual", "--sequence", "harsh_lighting", "--init", "ckpt:base-tiny", "--base-data", "grasp-base",
-            "--episodes", "4", "--steps", "2", "--eval-episodes", "2", "--name", "cont-error"]
+    args = [
+        "continual",
+        "--sequence",
+        "harsh_lighting",
+        "--init",
+        "ckpt:base-tiny",
+        "--base-data",
+        "grasp-base",
+        "--episodes",
+        "4",
+        "--steps",
+        "2",
+        "--eval-episodes",
+        "2",
+        "--name",
+        "cont-error",
+    ]
     assert run_cli(*args) == 2
     err = capsys.readouterr().err
     assert [line for line in err.splitlines() if line.startswith("nsl: error:")] == [
-        "nsl: error: collection of cont-error-harsh-lighting refused"]
+        "nsl: error: collection of cont-error-harsh-lighting refused"
+    ]
     with pytest.raises(ConfigError, match="collection of cont-error-harsh-lighting refused"):
         run_cli("--debug", *args)  # the stage's own exception, with its traceback
 
@@ -298,9 +584,32 @@ def test_continual_reports_a_stage_error_once_and_debug_shows_it(pipeline, monke
 def test_simulator_early_stopping_evaluates_on_its_own_scenes_and_catalogues_them(pipeline, capsys):
     from nsl.eval import read_curve
 
-    assert run_cli("train", "--data", "grasp-base=0.5", "--data", "grasp-harsh=0.5", "--init", "ckpt:base-tiny",
-                   "--steps", "4", "--name", "es-tiny", "--eval-every", "2", "--eval-episodes", "3",
-                   "--base-episodes", "2", "--eval-scenes", "3000", "--patience", "3") == 0
+    assert (
+        run_cli(
+            "train",
+            "--data",
+            "grasp-base=0.5",
+            "--data",
+            "grasp-harsh=0.5",
+            "--init",
+            "ckpt:base-tiny",
+            "--steps",
+            "4",
+            "--name",
+            "es-tiny",
+            "--eval-every",
+            "2",
+            "--eval-episodes",
+            "3",
+            "--base-episodes",
+            "2",
+            "--eval-scenes",
+            "3000",
+            "--patience",
+            "3",
+        )
+        == 0
+    )
     run_dir = workspace.runs_dir() / "es-tiny"
     rows = read_curve(run_dir / "curve.csv")
     assert [r.step for r in rows] == [0, 2, 4]

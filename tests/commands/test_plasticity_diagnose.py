@@ -27,14 +27,84 @@ def home(tmp_path_factory):
     home = tmp_path_factory.mktemp("diagnose_home")
     mp = pytest.MonkeyPatch()
     mp.setenv("NSL_HOME", str(home))
-    assert run_cli(*["collect", "--shift", "base", "--episodes", "16", "--policy", "oracle:0.5", "--data", "d-base",
-                    "--batch-size", "4"]) == 0
-    assert run_cli(*["collect", "--shift", "harsh_lighting", "--episodes", "12", "--policy", "oracle:0.5",
-                    "--data", "d-harsh", "--batch-size", "4"]) == 0
-    assert run_cli(*["train", "--data", "d-base", "--steps", "6", "--name", "tiny", "--net", "hidden=16",
-                    "--net", "conv_channels=4,4,8,8", "--batch-size", "8"]) == 0
-    assert run_cli(*["train", "--init", "ckpt:tiny", "--data", "d-base=0.5", "--data", "d-harsh=0.5",
-                    "--steps", "4", "--name", "tiny-ft", "--batch-size", "8", "--lr", "0.01"]) == 0
+    assert (
+        run_cli(
+            *[
+                "collect",
+                "--shift",
+                "base",
+                "--episodes",
+                "16",
+                "--policy",
+                "oracle:0.5",
+                "--data",
+                "d-base",
+                "--batch-size",
+                "4",
+            ]
+        )
+        == 0
+    )
+    assert (
+        run_cli(
+            *[
+                "collect",
+                "--shift",
+                "harsh_lighting",
+                "--episodes",
+                "12",
+                "--policy",
+                "oracle:0.5",
+                "--data",
+                "d-harsh",
+                "--batch-size",
+                "4",
+            ]
+        )
+        == 0
+    )
+    assert (
+        run_cli(
+            *[
+                "train",
+                "--data",
+                "d-base",
+                "--steps",
+                "6",
+                "--name",
+                "tiny",
+                "--net",
+                "hidden=16",
+                "--net",
+                "conv_channels=4,4,8,8",
+                "--batch-size",
+                "8",
+            ]
+        )
+        == 0
+    )
+    assert (
+        run_cli(
+            *[
+                "train",
+                "--init",
+                "ckpt:tiny",
+                "--data",
+                "d-base=0.5",
+                "--data",
+                "d-harsh=0.5",
+                "--steps",
+                "4",
+                "--name",
+                "tiny-ft",
+                "--batch-size",
+                "8",
+                "--lr",
+                "0.01",
+            ]
+        )
+        == 0
+    )
     yield home
     mp.undo()
 
@@ -42,8 +112,25 @@ def home(tmp_path_factory):
 def test_measurements_have_every_key_in_range(home, monkeypatch, tmp_path):
     monkeypatch.setenv("NSL_HOME", str(home))
     out = tmp_path / "diag.json"
-    assert _script().main(["--checkpoint", "ckpt:tiny", "--checkpoint", "ckpt:tiny-ft", "--data", "d-base",
-                           "--data", "d-harsh:8", "--transitions", "40", "--out", str(out)]) == 0
+    assert (
+        _script().main(
+            [
+                "--checkpoint",
+                "ckpt:tiny",
+                "--checkpoint",
+                "ckpt:tiny-ft",
+                "--data",
+                "d-base",
+                "--data",
+                "d-harsh:8",
+                "--transitions",
+                "40",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     result = json.loads(out.read_text())
     assert set(result["measurements"]) == {"ckpt:tiny", "ckpt:tiny-ft"}
     assert result["data"]["d-harsh:8"]["episodes"] == 8
@@ -91,17 +178,48 @@ def test_shrink_perturb_option_is_recorded_and_checked(home, monkeypatch, capsys
     from nsl import workspace
 
     monkeypatch.setenv("NSL_HOME", str(home))
-    assert run_cli("train", "--init", "ckpt:tiny", "--data", "d-harsh", "--steps", "1", "--name", "tiny-sp",
-                   "--batch-size", "8", "--shrink-perturb", "0.5,0.02") == 0
+    assert (
+        run_cli(
+            "train",
+            "--init",
+            "ckpt:tiny",
+            "--data",
+            "d-harsh",
+            "--steps",
+            "1",
+            "--name",
+            "tiny-sp",
+            "--batch-size",
+            "8",
+            "--shrink-perturb",
+            "0.5,0.02",
+        )
+        == 0
+    )
     run = json.loads((workspace.runs_dir() / "tiny-sp" / "run.json").read_text())
     assert run["training"]["shrink_perturb"] == [0.5, 0.02]
     command = json.loads((workspace.runs_dir() / "tiny-sp" / "command.json").read_text())
     assert command["options"]["shrink_perturb"] == "0.5,0.02"
     capsys.readouterr()
-    assert run_cli("train", "--init", "ckpt:tiny", "--data", "d-harsh", "--steps", "1", "--name", "tiny-sp2",
-                   "--shrink-perturb", "0.5") != 0
+    assert (
+        run_cli(
+            "train",
+            "--init",
+            "ckpt:tiny",
+            "--data",
+            "d-harsh",
+            "--steps",
+            "1",
+            "--name",
+            "tiny-sp2",
+            "--shrink-perturb",
+            "0.5",
+        )
+        != 0
+    )
     assert "write ALPHA,SIGMA" in capsys.readouterr().err
-    assert run_cli("train", "--data", "d-harsh", "--steps", "1", "--name", "tiny-sp3",
-                   "--shrink-perturb", "0.5,0.1") != 0
+    assert (
+        run_cli("train", "--data", "d-harsh", "--steps", "1", "--name", "tiny-sp3", "--shrink-perturb", "0.5,0.1") != 0
+    )
     assert "give --init" in capsys.readouterr().err
     assert not (workspace.runs_dir() / "tiny-sp3").exists()

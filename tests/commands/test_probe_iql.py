@@ -1,5 +1,5 @@
-"""scripts/experiments/probe_iql.py, the implicit Q-learning probe behind a row of docs/experiments/plateau.md: the warm-up
-fits V alone and leaves the parent's Q untouched; then Q trains, and the result is a checkpoint that acts."""
+"""scripts/experiments/probe_iql.py, the implicit Q-learning probe behind a row of docs/experiments/plateau.md: the
+warm-up fits V alone and leaves the parent's Q untouched; then Q trains, and the result is a checkpoint that acts."""
 
 from __future__ import annotations
 
@@ -33,10 +33,38 @@ def _weights(path: Path) -> dict[str, torch.Tensor]:
 
 def test_iql_probe_warms_up_v_alone_then_trains_q(tmp_path, monkeypatch):
     monkeypatch.setenv("NSL_HOME", str(tmp_path / "home"))
-    assert run_cli("collect", "--shift", "base", "--episodes", "12", "--policy", "oracle:0.5", "--data", "grasp-base",
-                   "--batch-size", "4") == 0
-    assert run_cli("collect", "--shift", "harsh_lighting", "--episodes", "8", "--policy", "oracle:0.5",
-                   "--data", "grasp-harsh", "--batch-size", "4") == 0
+    assert (
+        run_cli(
+            "collect",
+            "--shift",
+            "base",
+            "--episodes",
+            "12",
+            "--policy",
+            "oracle:0.5",
+            "--data",
+            "grasp-base",
+            "--batch-size",
+            "4",
+        )
+        == 0
+    )
+    assert (
+        run_cli(
+            "collect",
+            "--shift",
+            "harsh_lighting",
+            "--episodes",
+            "8",
+            "--policy",
+            "oracle:0.5",
+            "--data",
+            "grasp-harsh",
+            "--batch-size",
+            "4",
+        )
+        == 0
+    )
     assert run_cli("train", "--data", "grasp-base", "--steps", "4", "--name", "tiny") == 0
     with Catalog() as cat:
         parent = Path(cat.resolve_checkpoint("ckpt:tiny@latest").path)

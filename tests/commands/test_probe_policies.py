@@ -29,8 +29,9 @@ def test_mean_q_of_one_network_twice_acts_like_that_network():
     probe = _probe()
     cfg = EvalConfig(episodes=8, seed=5, workers=1, batch=4)
     single = evaluate_outcomes(functools.partial(load_policy, ASSET), [parse_shift("base")], cfg, progress=False)
-    twice = evaluate_outcomes(functools.partial(probe.mean_q_policy, [ASSET, ASSET]), [parse_shift("base")], cfg,
-                              progress=False)
+    twice = evaluate_outcomes(
+        functools.partial(probe.mean_q_policy, [ASSET, ASSET]), [parse_shift("base")], cfg, progress=False
+    )
     assert twice == single
     assert 0 < sum(single["base"]) < 8  # not a degenerate scene set: some succeed, some fail
 

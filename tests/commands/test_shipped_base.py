@@ -41,8 +41,22 @@ def test_ship_script_copies_a_runs_checkpoint_and_recipe(tmp_path):
     import subprocess
     import sys
 
-    assert run_cli("collect", "--shift", "base", "--episodes", "4", "--policy", "oracle", "--data", "tiny-base",
-                   "--batch-size", "4") == 0
+    assert (
+        run_cli(
+            "collect",
+            "--shift",
+            "base",
+            "--episodes",
+            "4",
+            "--policy",
+            "oracle",
+            "--data",
+            "tiny-base",
+            "--batch-size",
+            "4",
+        )
+        == 0
+    )
     assert run_cli("train", "--data", "tiny-base", "--steps", "2", "--checkpoint-every", "2", "--name", "tiny") == 0
     from tests.test_ship_base import CLEAN, _set_code_version
 
@@ -78,8 +92,23 @@ def test_shipped_base_grasps_well_and_every_shift_hurts_as_in_the_study(capsys):
     (`--shift study`) costs at least 10 points and within 15 of the study's drop (Table 5.1)."""
     from nsl.study.reference import STUDY_DROPS
 
-    assert run_cli("eval", "--checkpoint", "ckpt:base", "--shift", "study", "--episodes", "1000", "--workers", "2",
-                   "--seed", "2000", "--json") == 0
+    assert (
+        run_cli(
+            "eval",
+            "--checkpoint",
+            "ckpt:base",
+            "--shift",
+            "study",
+            "--episodes",
+            "1000",
+            "--workers",
+            "2",
+            "--seed",
+            "2000",
+            "--json",
+        )
+        == 0
+    )
     results = json.loads(capsys.readouterr().out)["results"]
     base = results.pop("base")["success_rate"]
     assert base >= 0.85, base  # README: 85.4% [83.1-87.5] on these scenes
@@ -95,23 +124,92 @@ def test_shipped_base_recovers_harsh_lighting_from_its_own_data(capsys):
     collects 800 harsh-lighting episodes itself, and the fine-tuning recipe (`nsl train --init`'s defaults: 2,000 steps,
     conservative term 0.1), 50/50 with its scripted base data, lifts harsh-lighting success by at least 15 points on
     200 reporting scenes, with the base task within 10 points."""
-    for policy, name, seed, episodes in (("oracle:0.5", "grasp-base-oracle", "1", "4000"),
-                                         ("oracle:1.0", "grasp-base-noisy", "2", "2000"),
-                                         ("random", "grasp-base-random", "3", "2000")):
-        assert run_cli("collect", "--shift", "base", "--episodes", episodes, "--policy", policy, "--data", name,
-                       "--seed", seed, "--workers", "2", "--batch-size", "8") == 0
-    assert run_cli("collect", "--shift", "harsh_lighting@2", "--episodes", "800", "--policy", "ckpt:base",
-                   "--epsilon", "0.1", "--data", "demo-harsh", "--workers", "2", "--batch-size", "8") == 0
-    assert run_cli("train", "--data", "grasp-base-oracle=0.27", "--data", "grasp-base-noisy=0.115",
-                   "--data", "grasp-base-random=0.115", "--data", "demo-harsh=0.5", "--init", "ckpt:base",
-                   "--name", "plastic") == 0
+    for policy, name, seed, episodes in (
+        ("oracle:0.5", "grasp-base-oracle", "1", "4000"),
+        ("oracle:1.0", "grasp-base-noisy", "2", "2000"),
+        ("random", "grasp-base-random", "3", "2000"),
+    ):
+        assert (
+            run_cli(
+                "collect",
+                "--shift",
+                "base",
+                "--episodes",
+                episodes,
+                "--policy",
+                policy,
+                "--data",
+                name,
+                "--seed",
+                seed,
+                "--workers",
+                "2",
+                "--batch-size",
+                "8",
+            )
+            == 0
+        )
+    assert (
+        run_cli(
+            "collect",
+            "--shift",
+            "harsh_lighting@2",
+            "--episodes",
+            "800",
+            "--policy",
+            "ckpt:base",
+            "--epsilon",
+            "0.1",
+            "--data",
+            "demo-harsh",
+            "--workers",
+            "2",
+            "--batch-size",
+            "8",
+        )
+        == 0
+    )
+    assert (
+        run_cli(
+            "train",
+            "--data",
+            "grasp-base-oracle=0.27",
+            "--data",
+            "grasp-base-noisy=0.115",
+            "--data",
+            "grasp-base-random=0.115",
+            "--data",
+            "demo-harsh=0.5",
+            "--init",
+            "ckpt:base",
+            "--name",
+            "plastic",
+        )
+        == 0
+    )
     capsys.readouterr()
-    assert run_cli("eval", "--checkpoint", "ckpt:base,ckpt:plastic", "--shift", "base,harsh_lighting@2",
-                   "--episodes", "200", "--workers", "2", "--seed", "2000", "--json") == 0
+    assert (
+        run_cli(
+            "eval",
+            "--checkpoint",
+            "ckpt:base,ckpt:plastic",
+            "--shift",
+            "base,harsh_lighting@2",
+            "--episodes",
+            "200",
+            "--workers",
+            "2",
+            "--seed",
+            "2000",
+            "--json",
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     (base_before, harsh_before), (base_after, harsh_after) = [
         [out["policies"][k]["results"][t]["success_rate"] for t in ("base", "harsh_lighting@2")]
-        for k in ("ckpt:base", "ckpt:plastic")]
+        for k in ("ckpt:base", "ckpt:plastic")
+    ]
     assert harsh_after >= harsh_before + 0.15, out["policies"]
     assert out["paired"]["harsh_lighting@2"]["p_value"] < 0.01
     assert base_after >= base_before - 0.10, out["policies"]

@@ -9,8 +9,17 @@ import math
 import numpy as np
 import pytest
 
-from nsl.curriculum import (SCRATCH, TransferMatrix, advantage, build_curriculum, load_matrix, matrix_from_dict,
-                            plot_curriculum, rank_correlation, save_matrix)
+from nsl.curriculum import (
+    SCRATCH,
+    TransferMatrix,
+    advantage,
+    build_curriculum,
+    load_matrix,
+    matrix_from_dict,
+    plot_curriculum,
+    rank_correlation,
+    save_matrix,
+)
 from nsl.errors import ConfigError, CorruptDataError, UnknownReferenceError
 
 
@@ -105,16 +114,26 @@ def test_costs_from_base_and_subsets_of_tasks():
     assert dict(sub.optimal.parent) == {"x": SCRATCH, "y": "x"}
 
 
-@pytest.mark.parametrize("data, message", [
-    ({"tasks": ["a", "b", "c"], "advantage": {"a": {"b": 1.0, "c": 1.0}, "b": {"a": 1.0, "c": 1.0},
-                                              "c": {"a": 1.0}}}, r"no entry A\(c -> b\) \(1 missing\)"),
-    ({"tasks": ["a", "b"], "advantage": {"a": {"b": 1.0}, "b": {"a": 1.0}, "z": {"a": 1.0}}},
-     "not square: entry A\\(z -> a\\) names task 'z'"),
-    ({"tasks": ["a", "b"], "advantage": {"a": {"b": -0.5}, "b": {"a": 1.0}}}, r"A\(a -> b\) = -0.5 must be"),
-    ({"tasks": ["a", "b"], "advantage": {"a": {"b": float("nan")}, "b": {"a": 1.0}}}, "must be a finite number"),
-    ({"tasks": ["a", "scratch"], "advantage": {}}, "names the from-scratch root"),
-    ({"tasks": "a b", "advantage": {}}, "'tasks' must be a list"),
-])
+@pytest.mark.parametrize(
+    "data, message",
+    [
+        (
+            {
+                "tasks": ["a", "b", "c"],
+                "advantage": {"a": {"b": 1.0, "c": 1.0}, "b": {"a": 1.0, "c": 1.0}, "c": {"a": 1.0}},
+            },
+            r"no entry A\(c -> b\) \(1 missing\)",
+        ),
+        (
+            {"tasks": ["a", "b"], "advantage": {"a": {"b": 1.0}, "b": {"a": 1.0}, "z": {"a": 1.0}}},
+            "not square: entry A\\(z -> a\\) names task 'z'",
+        ),
+        ({"tasks": ["a", "b"], "advantage": {"a": {"b": -0.5}, "b": {"a": 1.0}}}, r"A\(a -> b\) = -0.5 must be"),
+        ({"tasks": ["a", "b"], "advantage": {"a": {"b": float("nan")}, "b": {"a": 1.0}}}, "must be a finite number"),
+        ({"tasks": ["a", "scratch"], "advantage": {}}, "names the from-scratch root"),
+        ({"tasks": "a b", "advantage": {}}, "'tasks' must be a list"),
+    ],
+)
 def test_bad_matrices_are_refused_in_one_line(data, message):
     with pytest.raises(ConfigError, match=message) as e:
         matrix_from_dict(data, "m.json")
@@ -122,8 +141,10 @@ def test_bad_matrices_are_refused_in_one_line(data, message):
 
 
 def test_unknown_and_unmeasured_tasks_are_refused():
-    m = TransferMatrix(("a", "b", "c"), {("a", "b"): 1.0, ("b", "a"): 1.0, ("a", "c"): None, ("c", "a"): 2.0,
-                                         ("b", "c"): 1.0, ("c", "b"): 1.0})
+    m = TransferMatrix(
+        ("a", "b", "c"),
+        {("a", "b"): 1.0, ("b", "a"): 1.0, ("a", "c"): None, ("c", "a"): 2.0, ("b", "c"): 1.0, ("c", "b"): 1.0},
+    )
     with pytest.raises(UnknownReferenceError, match="task 'd' is not in the transfer matrix; its tasks: a, b, c"):
         build_curriculum(m, ["a", "d"])
     with pytest.raises(ConfigError, match=r"no measurement of A\(a -> c\)"):
@@ -134,8 +155,13 @@ def test_unknown_and_unmeasured_tasks_are_refused():
 
 
 def test_matrix_file_round_trip_and_bad_files(tmp_path):
-    m = TransferMatrix(("base", "x"), {("base", "x"): 1.7, ("x", "base"): None}, {("base", "x"): (1.1, 2.3)},
-                       base="base", meta={"note": "hand-made"})
+    m = TransferMatrix(
+        ("base", "x"),
+        {("base", "x"): 1.7, ("x", "base"): None},
+        {("base", "x"): (1.1, 2.3)},
+        base="base",
+        meta={"note": "hand-made"},
+    )
     path = save_matrix(m, tmp_path / "matrix.json")
     back = load_matrix(path)
     assert back == m
@@ -143,8 +169,9 @@ def test_matrix_file_round_trip_and_bad_files(tmp_path):
     (tmp_path / "bad.json").write_text("{not json")
     with pytest.raises(CorruptDataError, match="not valid JSON"):
         load_matrix(tmp_path / "bad.json")
-    (tmp_path / "future.json").write_text(json.dumps({"format": "nsl.transfer-matrix", "version": 9, "tasks": [],
-                                                      "advantage": {}}))
+    (tmp_path / "future.json").write_text(
+        json.dumps({"format": "nsl.transfer-matrix", "version": 9, "tasks": [], "advantage": {}})
+    )
     with pytest.raises(CorruptDataError, match="up to version 1"):
         load_matrix(tmp_path / "future.json")
     with pytest.raises(ConfigError, match="does not exist; `nsl transfer run PLAN` writes one"):

@@ -23,8 +23,15 @@ class SynthEpisode:
     info: dict = field(default_factory=dict)
 
 
-def synth_episode(index: int, length: int, *, truncated: bool = False, success: bool = False,
-                  size: int = 16, state_offset: float = 0.0) -> SynthEpisode:
+def synth_episode(
+    index: int,
+    length: int,
+    *,
+    truncated: bool = False,
+    success: bool = False,
+    size: int = 16,
+    state_offset: float = 0.0,
+) -> SynthEpisode:
     rng = np.random.default_rng(index)
     images = rng.integers(0, 256, (length, size, size, 3), dtype=np.uint8)
     images[:, 0, 0, 0] = index
@@ -35,12 +42,24 @@ def synth_episode(index: int, length: int, *, truncated: bool = False, success: 
     rewards = np.zeros(length, np.float32)
     if success and not truncated:
         rewards[-1] = 1.0
-    return SynthEpisode(index, images, states, actions, rewards, terminated=not truncated, truncated=truncated,
-                        success=success and not truncated)
+    return SynthEpisode(
+        index,
+        images,
+        states,
+        actions,
+        rewards,
+        terminated=not truncated,
+        truncated=truncated,
+        success=success and not truncated,
+    )
 
 
-SYNTH_SPEC = {"env": {"shift": "synthetic", "image_size": 16}, "policy": {"policy": "none"}, "policy_ref": "none",
-              "seed": 0}
+SYNTH_SPEC = {
+    "env": {"shift": "synthetic", "image_size": 16},
+    "policy": {"policy": "none"},
+    "policy_ref": "none",
+    "seed": 0,
+}
 
 
 @pytest.fixture
@@ -54,10 +73,26 @@ def make_synth():
     """``make_synth(name, lengths, truncated=set(), successes=set(), ...)`` writes a version, returns it."""
     from nsl.datasets import api
 
-    def make(name: str, lengths: list[int], truncated=(), successes=(), start: int = 0, episodes_per_file: int = 3,
-             state_offset: float = 0.0, spec: dict | None = None):
-        eps = [synth_episode(start + i, n, truncated=(start + i) in truncated, success=(start + i) in successes,
-                             state_offset=state_offset) for i, n in enumerate(lengths)]
+    def make(
+        name: str,
+        lengths: list[int],
+        truncated=(),
+        successes=(),
+        start: int = 0,
+        episodes_per_file: int = 3,
+        state_offset: float = 0.0,
+        spec: dict | None = None,
+    ):
+        eps = [
+            synth_episode(
+                start + i,
+                n,
+                truncated=(start + i) in truncated,
+                success=(start + i) in successes,
+                state_offset=state_offset,
+            )
+            for i, n in enumerate(lengths)
+        ]
         return api.write_dataset(name, eps, spec or SYNTH_SPEC, 16, len(eps), episodes_per_file=episodes_per_file)
 
     return make

@@ -26,9 +26,30 @@ def test_a_collection_is_the_same_in_any_workspace_worker_count_and_batch_size(c
     got = {}
     for home, workers, batch in (("first", "1", "1"), ("second/elsewhere", "2", "4")):
         monkeypatch.setenv("NSL_HOME", str(tmp_path / home))
-        assert run_cli("collect", "--shift", shift, "--policy", policy, "--epsilon", epsilon, "--episodes", episodes,
-                       "--seed", "5", "--data", "same", "--workers", workers, "--batch-size", batch,
-                       "--episodes-per-file", "4") == 0
+        assert (
+            run_cli(
+                "collect",
+                "--shift",
+                shift,
+                "--policy",
+                policy,
+                "--epsilon",
+                epsilon,
+                "--episodes",
+                episodes,
+                "--seed",
+                "5",
+                "--data",
+                "same",
+                "--workers",
+                workers,
+                "--batch-size",
+                batch,
+                "--episodes-per-file",
+                "4",
+            )
+            == 0
+        )
         v = api.open_version("same")
         got[home] = (v.episodes.content_hash, v.view().content_hash, v.hash)
     first, second = got.values()
@@ -44,8 +65,13 @@ def test_a_dataset_whose_spec_records_a_checkpoint_path_can_still_be_appended_to
     from nsl.datasets.collection import Collection
     from nsl.errors import ConfigError
 
-    policy = {"policy": "cem", "name": "ckpt:00006000-6338b2320779", "checkpoint_id": "6338b2" + "0" * 58, "step": 6000,
-              "epsilon": 0.1}
+    policy = {
+        "policy": "cem",
+        "name": "ckpt:00006000-6338b2320779",
+        "checkpoint_id": "6338b2" + "0" * 58,
+        "step": 6000,
+        "epsilon": 0.1,
+    }
     spec = {"env": {"shift": "harsh_lighting"}, "policy": policy, "policy_ref": "ckpt:base", "seed": 5}
     make_synth("older", [3, 4], spec={**spec, "policy": {**policy, "checkpoint": "/elsewhere/checkpoints/base"}})
     assert Collection.begin("older", 4, spec, 16).start == 2  # same content-defining settings: appends

@@ -32,8 +32,22 @@ def _assert_lerobot_matches(ds, ours: dict[str, np.ndarray]) -> None:
 
 
 def test_lerobot_opens_a_collected_dataset_with_identical_content(lerobot_offline, tmp_path):
-    assert run_cli("collect", "--shift", "harsh_lighting", "--episodes", "6", "--policy", "oracle:0.5",
-                   "--data", "grasp-harsh", "--episodes-per-file", "4") == 0
+    assert (
+        run_cli(
+            "collect",
+            "--shift",
+            "harsh_lighting",
+            "--episodes",
+            "6",
+            "--policy",
+            "oracle:0.5",
+            "--data",
+            "grasp-harsh",
+            "--episodes-per-file",
+            "4",
+        )
+        == 0
+    )
     view = api.open_view("grasp-harsh")
     ours = view.episodes_arrays()
     assert ours[keys.OBS_IMAGE].shape == (view.num_frames, 64, 64, 3)
@@ -45,8 +59,7 @@ def test_lerobot_opens_a_collected_dataset_with_identical_content(lerobot_offlin
 
     # A tier through LeRobot's own episode filter, and the exported tier as a standalone dataset.
     tier = api.open_view("grasp-harsh:5").episodes_arrays()
-    _assert_lerobot_matches(lerobot_offline("local/grasp-harsh", root=view.version.root, episodes=list(range(5))),
-                            tier)
+    _assert_lerobot_matches(lerobot_offline("local/grasp-harsh", root=view.version.root, episodes=list(range(5))), tier)
     out = api.export("grasp-harsh:5", tmp_path / "export")
     assert not (out / "manifest.json").exists() and not (out / "meta/nsl.json").exists()
     assert "oracle" in (out / "README.md").read_text()
@@ -64,7 +77,8 @@ def test_frame_flags_and_row_groups(make_synth):
     assert [f0.metadata.row_group(g).num_rows for g in range(3)] == [3, 4, 2]
     assert f0.schema_arrow.field(keys.OBS_IMAGE).type.names == ["bytes", "path"]
     assert json.loads(f0.schema_arrow.metadata[b"huggingface"])["info"]["features"][keys.OBS_IMAGE] == {
-        "_type": "Image"}
+        "_type": "Image"
+    }
 
     a = v.view().read_columns()
     ends = np.cumsum([3, 4, 2, 5]) - 1

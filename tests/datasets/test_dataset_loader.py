@@ -9,9 +9,15 @@ from nsl import keys
 from nsl.datasets import api
 from nsl.errors import ConfigError
 
-BATCH_SPEC = {keys.OBS_IMAGE: ((16, 16, 3), np.uint8), keys.NEXT_OBS_IMAGE: ((16, 16, 3), np.uint8),
-              keys.OBS_STATE: ((6,), np.float32), keys.NEXT_OBS_STATE: ((6,), np.float32),
-              keys.ACTION: ((6,), np.float32), keys.REWARD: ((), np.float32), keys.DONE: ((), np.float32)}
+BATCH_SPEC = {
+    keys.OBS_IMAGE: ((16, 16, 3), np.uint8),
+    keys.NEXT_OBS_IMAGE: ((16, 16, 3), np.uint8),
+    keys.OBS_STATE: ((6,), np.float32),
+    keys.NEXT_OBS_STATE: ((6,), np.float32),
+    keys.ACTION: ((6,), np.float32),
+    keys.REWARD: ((), np.float32),
+    keys.DONE: ((), np.float32),
+}
 
 
 def test_transitions_follow_episodes_and_skip_truncated_ends(make_synth):
@@ -48,8 +54,7 @@ def test_mixing_by_weight_and_reproducible_batches(make_synth):
     assert [src["ref"] for src in d["sources"]] == ["base@v1", "target@v1:2"]
     assert [src["weight"] for src in d["sources"]] == [0.5, 0.5] and d["sources"][1]["episodes"] == 2
     assert len(s) == 24 + 10
-    from_target = np.concatenate([s.sample(256, np.random.default_rng(i))[keys.OBS_STATE][:, 0]
-                                  for i in range(20)])
+    from_target = np.concatenate([s.sample(256, np.random.default_rng(i))[keys.OBS_STATE][:, 0] for i in range(20)])
     assert abs(from_target.mean() - 0.5) < 0.03  # 5120 draws: 4.3 standard deviations
     tier = api.make_sampler("target:2").sample(512, np.random.default_rng(1))
     assert set(np.unique(tier[keys.OBS_IMAGE][:, 0, 0, 0])) == {0, 1}  # a tier holds its first episodes only
@@ -73,7 +78,11 @@ def test_n_step_transitions_follow_the_data_to_the_episode_end(make_synth):
     lengths, gamma, n = [3, 4, 2, 6], 0.5, 3
     make_synth("chains", lengths, truncated={1}, successes={2, 3})
     one, s = api.make_sampler("chains"), api.make_sampler("chains", n_step=n, gamma=gamma)
-    assert len(s) == len(one) and s.describe()["n_step"] == n and keys.DISCOUNT not in one.sample(4, np.random.default_rng(0))
+    assert (
+        len(s) == len(one)
+        and s.describe()["n_step"] == n
+        and keys.DISCOUNT not in one.sample(4, np.random.default_rng(0))
+    )
     b = s.sample(4000, np.random.default_rng(0))
     ep, t = b[keys.OBS_IMAGE][:, 0, 0, 0].astype(int), b[keys.OBS_IMAGE][:, 0, 0, 1].astype(int)
     nep, nt = b[keys.NEXT_OBS_IMAGE][:, 0, 0, 0].astype(int), b[keys.NEXT_OBS_IMAGE][:, 0, 0, 1].astype(int)

@@ -18,8 +18,17 @@ from nsl.errors import ConfigError, UnknownReferenceError
 from tests.conftest import run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
-COLLECT = ["collect", "--shift", "checkerboard_backing", "--episodes", "10", "--policy", "oracle:0.5",
-           "--episodes-per-file", "3"]
+COLLECT = [
+    "collect",
+    "--shift",
+    "checkerboard_backing",
+    "--episodes",
+    "10",
+    "--policy",
+    "oracle:0.5",
+    "--episodes-per-file",
+    "3",
+]
 
 
 def _collect(name: str, *extra: str) -> int:
@@ -46,10 +55,8 @@ def test_resumed_and_parallel_collections_equal_an_uninterrupted_one(capsys):
 
 
 def test_killed_collection_leaves_no_version_and_resumes_to_the_same_hash():
-    argv = [sys.executable, "-m", "nsl", *COLLECT, "--episodes", "16", "--episodes-per-file", "2",
-            "--data", "killed"]
-    proc = subprocess.Popen(argv, cwd=ROOT, env={**os.environ}, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+    argv = [sys.executable, "-m", "nsl", *COLLECT, "--episodes", "16", "--episodes-per-file", "2", "--data", "killed"]
+    proc = subprocess.Popen(argv, cwd=ROOT, env={**os.environ}, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     staged = api.dataset_root("killed") / ".staging/data/chunk-000/file-000.parquet"
     try:
         deadline = time.time() + 120
@@ -85,7 +92,7 @@ def test_append_makes_a_new_version_that_shares_the_old_files(make_synth):
 
 
 def test_tiers_are_nested_views(make_synth):
-    v = make_synth("tiered", [3, 4, 2, 5, 3, 4, 2], successes={1, 4})
+    make_synth("tiered", [3, 4, 2, 5, 3, 4, 2], successes={1, 4})
     rows = api.tiers("tiered", sizes=(2, 5))
     assert [r["episodes"] for r in rows] == [2, 5, 7]
     small, mid, full = (api.open_view(f"tiered:{k}").episodes_arrays() for k in (2, 5, 7))
@@ -114,9 +121,9 @@ def test_refs_and_settings_errors(make_synth):
 
     assert _collect("mixed", "--stop-after-files", "1") == 130
     with pytest.raises(ConfigError, match="unfinished collection with other settings.*--restart"):
-        run_cli("--debug", "collect", "--shift", "base", "--episodes", "10", "--policy", "oracle:0.5",
-                "--data", "mixed")
+        run_cli(
+            "--debug", "collect", "--shift", "base", "--episodes", "10", "--policy", "oracle:0.5", "--data", "mixed"
+        )
     assert _collect("mixed", "--episodes", "3") == 0  # same settings, fewer episodes: resumes and publishes
     with pytest.raises(ConfigError, match="collected with other settings"):
-        run_cli("--debug", "collect", "--shift", "base", "--episodes", "6", "--policy", "oracle:0.5",
-                "--data", "mixed")
+        run_cli("--debug", "collect", "--shift", "base", "--episodes", "6", "--policy", "oracle:0.5", "--data", "mixed")

@@ -11,9 +11,7 @@ from nsl.eval import PerformanceMatrix, Rate, SuccessRate, continual_metrics, cu
 
 TASKS = ["base", "A", "B"]
 STAGES = ["init", "A", "B"]
-R = [[0.80, 0.30, 0.40],
-     [0.70, 0.90, 0.50],
-     [0.75, 0.60, 0.85]]
+R = [[0.80, 0.30, 0.40], [0.70, 0.90, 0.50], [0.75, 0.60, 0.85]]
 
 
 def _matrix(**kw) -> PerformanceMatrix:
@@ -44,12 +42,13 @@ def test_metrics_on_a_hand_made_matrix():
 
 def test_best_earlier_forgetting_differs_from_end_of_own_training():
     # A improves after its own stage (0.9 -> 0.95 at stage 2) and ends at 0.6
-    m = continual_metrics(PerformanceMatrix(
-        ["base", "A", "B", "C"], ["init", "A", "B", "C"],
-        [[0.8, 0.3, 0.4, 0.2],
-         [0.8, 0.9, 0.5, 0.3],
-         [0.8, 0.95, 0.8, 0.3],
-         [0.8, 0.6, 0.8, 0.7]]))
+    m = continual_metrics(
+        PerformanceMatrix(
+            ["base", "A", "B", "C"],
+            ["init", "A", "B", "C"],
+            [[0.8, 0.3, 0.4, 0.2], [0.8, 0.9, 0.5, 0.3], [0.8, 0.95, 0.8, 0.3], [0.8, 0.6, 0.8, 0.7]],
+        )
+    )
     assert m.forgetting["A"] == pytest.approx(0.35)  # issue's definition: best earlier - final
     assert m.forgetting_end["A"] == pytest.approx(0.30)  # Continual World's: end of own training - final
     assert m.forgetting["B"] == pytest.approx(0.0) and m.forgetting["base"] == pytest.approx(0.0)
@@ -94,13 +93,16 @@ def test_table_5_3_shape():
     assert "Average final success 73%" in md
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"stages": ["init", "A", "A"]}, "repeat a task"),
-    ({"stages": ["init", "A", "Z"]}, r"stages \['Z'\] are not among the matrix tasks"),
-    ({"success": [[0.8, 30, 0.4], [0.7, 0.9, 0.5], [0.75, 0.6, 0.85]]}, r"values \[30.0\] outside \[0, 1\]"),
-    ({"success": R[:2]}, "2 rows for 3 stages"),
-    ({"base_task": "A"}, "cannot also be trained"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"stages": ["init", "A", "A"]}, "repeat a task"),
+        ({"stages": ["init", "A", "Z"]}, r"stages \['Z'\] are not among the matrix tasks"),
+        ({"success": [[0.8, 30, 0.4], [0.7, 0.9, 0.5], [0.75, 0.6, 0.85]]}, r"values \[30.0\] outside \[0, 1\]"),
+        ({"success": R[:2]}, "2 rows for 3 stages"),
+        ({"base_task": "A"}, "cannot also be trained"),
+    ],
+)
 def test_bad_matrices_are_rejected(kwargs, match):
     args = {"tasks": TASKS, "stages": STAGES, "success": R, **kwargs}
     with pytest.raises(ConfigError, match=match):

@@ -6,8 +6,21 @@ import numpy as np
 import pytest
 
 from nsl.errors import ConfigError
-from nsl.eval import (CurveRow, EarlyStopConfig, EarlyStopMonitor, EarlyStopping, Rate, choices_table, choose_steps,
-                      held_out_episodes, offline_scores, q_ranking_auc, read_curve, soft_opc, td_error)
+from nsl.eval import (
+    CurveRow,
+    EarlyStopConfig,
+    EarlyStopMonitor,
+    EarlyStopping,
+    Rate,
+    choices_table,
+    choose_steps,
+    held_out_episodes,
+    offline_scores,
+    q_ranking_auc,
+    read_curve,
+    soft_opc,
+    td_error,
+)
 
 # A Fig. 5.7-like curve: rises to a peak at step 5000, then collapses below the start.
 STEPS = [0, 1000, 2000, 3000, 4000, 5000, 6000, 7000, 8000, 9000]
@@ -42,22 +55,28 @@ def test_a_new_best_resets_the_patience():
     assert stop and es.best_step == 2 and es.stopped_step == 4
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"patience": 0}, "patience 0 must be an integer of at least 1"),
-    ({"patience": 2, "mode": "up"}, "mode 'up' is unknown"),
-    ({"patience": 2, "min_delta": -1}, "min_delta -1 must be >= 0"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"patience": 0}, "patience 0 must be an integer of at least 1"),
+        ({"patience": 2, "mode": "up"}, "mode 'up' is unknown"),
+        ({"patience": 2, "min_delta": -1}, "min_delta -1 must be >= 0"),
+    ],
+)
 def test_bad_early_stopping_settings(kwargs, match):
     with pytest.raises(ConfigError, match=match):
         EarlyStopping(**kwargs)
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"criterion": "loss"}, "criterion 'loss' is unknown; use one of eval, softopc, auc, td"),
-    ({"episodes": 0}, "criterion 'eval' needs episodes >= 1"),
-    ({"every": 0}, "every 0 must be at least 1"),
-    ({"held_out": 1.5}, "held_out 1.5 must be between 0 and 1"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"criterion": "loss"}, "criterion 'loss' is unknown; use one of eval, softopc, auc, td"),
+        ({"episodes": 0}, "criterion 'eval' needs episodes >= 1"),
+        ({"every": 0}, "every 0 must be at least 1"),
+        ({"held_out": 1.5}, "held_out 1.5 must be between 0 and 1"),
+    ],
+)
 def test_bad_early_stop_config(kwargs, match):
     with pytest.raises(ConfigError, match=match):
         EarlyStopConfig(**kwargs)
@@ -74,6 +93,7 @@ def test_early_stop_config_round_trips_and_builds_eval_configs():
 
 
 # --- offline criteria ---------------------------------------------------------------------------------------------
+
 
 def _held_out(seed=0, n_episodes=40, steps=6):
     rng = np.random.default_rng(seed)
@@ -126,11 +146,14 @@ def test_held_out_episodes_is_deterministic_and_never_everything():
 
 # --- choosing steps on a recorded curve -----------------------------------------------------------------------------
 
+
 def _curve_rows():
     softopc = [0.05, 0.07, 0.09, 0.10, 0.12, 0.11, 0.13, 0.09, 0.06, 0.04]  # peaks late, at 6000
     td = [0.20, 0.15, 0.12, 0.10, 0.09, 0.08, 0.085, 0.09, 0.11, 0.14]  # lowest at 5000
-    return [CurveRow(s, Rate(t, 50), Rate(0.86, 50), softopc=o, td_error=d)
-            for s, t, o, d in zip(STEPS, TARGET, softopc, td)]
+    return [
+        CurveRow(s, Rate(t, 50), Rate(0.86, 50), softopc=o, td_error=d)
+        for s, t, o, d in zip(STEPS, TARGET, softopc, td)
+    ]
 
 
 def test_choose_steps_reports_each_criterion_against_the_best_step():
@@ -156,6 +179,7 @@ def test_choose_steps_with_patience_stops_where_the_live_rule_would():
 
 # --- the trainer's eval_fn -------------------------------------------------------------------------------------------
 
+
 class _Scripted:
     """Returns the next value of a fixed curve on each call (what a simulator would measure)."""
 
@@ -170,8 +194,13 @@ class _Scripted:
 
 def test_monitor_records_the_curve_stops_and_keeps_the_best(tmp_path):
     best_calls = []
-    mon = EarlyStopMonitor(EarlyStopConfig(every=1000, patience=3), tmp_path, score_target=_Scripted(TARGET),
-                           score_base=_Scripted([0.86] * 10), on_best=lambda step, policy: best_calls.append(step))
+    mon = EarlyStopMonitor(
+        EarlyStopConfig(every=1000, patience=3),
+        tmp_path,
+        score_target=_Scripted(TARGET),
+        score_base=_Scripted([0.86] * 10),
+        on_best=lambda step, policy: best_calls.append(step),
+    )
     results = []
     for step in STEPS:
         results.append(mon(step, policy=f"policy@{step}"))
@@ -202,12 +231,16 @@ def test_monitor_resumes_with_the_same_decision(tmp_path):
 
 
 def test_a_resumed_curve_must_keep_its_scenes(tmp_path):
-    first = EarlyStopMonitor(EarlyStopConfig(every=1000, patience=3, seed=3000), tmp_path, score_target=_Scripted(TARGET))
+    first = EarlyStopMonitor(
+        EarlyStopConfig(every=1000, patience=3, seed=3000), tmp_path, score_target=_Scripted(TARGET)
+    )
     first(0, None)
     first(1000, None)
     with pytest.raises(ConfigError, match=r"evaluated with seed 3000; resume with the same settings \(--eval-scenes"):
         EarlyStopMonitor(EarlyStopConfig(every=1000, patience=3, seed=2000), tmp_path, score_target=_Scripted(TARGET))
-    same = EarlyStopMonitor(EarlyStopConfig(every=1000, patience=3, seed=3000), tmp_path, score_target=_Scripted(TARGET))
+    same = EarlyStopMonitor(
+        EarlyStopConfig(every=1000, patience=3, seed=3000), tmp_path, score_target=_Scripted(TARGET)
+    )
     assert [r.step for r in same.rows] == [0, 1000]
 
 

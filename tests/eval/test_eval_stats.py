@@ -19,13 +19,16 @@ def _wilson_reference(k: int, n: int, z: float = 1.959963984540054) -> tuple[flo
     return (k + z * z / 2 - root) / (n + z * z), (k + z * z / 2 + root) / (n + z * z)
 
 
-@pytest.mark.parametrize("k, n, expected", [
-    (8, 10, (0.490, 0.943)),
-    (0, 10, (0.000, 0.278)),
-    (10, 10, (0.722, 1.000)),
-    (50, 100, (0.404, 0.596)),
-    (1, 50, (0.004, 0.105)),
-])
+@pytest.mark.parametrize(
+    "k, n, expected",
+    [
+        (8, 10, (0.490, 0.943)),
+        (0, 10, (0.000, 0.278)),
+        (10, 10, (0.722, 1.000)),
+        (50, 100, (0.404, 0.596)),
+        (1, 50, (0.004, 0.105)),
+    ],
+)
 def test_wilson_interval_matches_known_values(k, n, expected):
     lo, hi = wilson_interval(k, n)
     assert (round(lo, 3), round(hi, 3)) == expected
@@ -71,11 +74,14 @@ def _modules_after(statement: str) -> set[str]:
     return set(json.loads(out.stdout.splitlines()[-1]))
 
 
-@pytest.mark.parametrize("statement", [
-    "from nsl.eval import wilson_interval, SuccessRate, markdown_table",
-    "from nsl.eval import compare_paired, mcnemar_exact, continual_metrics, Rate, read_curve",
-    "from nsl.catalog import Catalog, wilson_interval",
-])
+@pytest.mark.parametrize(
+    "statement",
+    [
+        "from nsl.eval import wilson_interval, SuccessRate, markdown_table",
+        "from nsl.eval import compare_paired, mcnemar_exact, continual_metrics, Rate, read_curve",
+        "from nsl.catalog import Catalog, wilson_interval",
+    ],
+)
 def test_statistics_import_no_simulator_and_no_torch(statement):
     loaded = _modules_after(statement)
     assert not {"mujoco", "torch", "nsl.collectors"} & loaded, statement

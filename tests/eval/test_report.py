@@ -8,32 +8,58 @@ import pytest
 from PIL import Image
 
 from nsl.errors import CorruptDataError, UnknownReferenceError
-from nsl.eval import (CurveRow, EarlyStopConfig, PerformanceMatrix, Rate, TierResults, TierRow, plot_curve,
-                      plot_tiers, read_curve, tiers_table, write_curve, write_report)
+from nsl.eval import (
+    CurveRow,
+    EarlyStopConfig,
+    PerformanceMatrix,
+    Rate,
+    TierResults,
+    TierRow,
+    plot_curve,
+    plot_tiers,
+    read_curve,
+    tiers_table,
+    write_curve,
+    write_report,
+)
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
 def _curve():
     target = [0.43, 0.60, 0.80, 0.90, 0.70, 0.40]
-    return [CurveRow(s, Rate(t, 50), Rate(0.86, 50), softopc=0.1 * t, td_error=abs(t - 0.9) + 0.05)
-            for s, t in zip([0, 1000, 2000, 3000, 4000, 5000], target)]
+    return [
+        CurveRow(s, Rate(t, 50), Rate(0.86, 50), softopc=0.1 * t, td_error=abs(t - 0.9) + 0.05)
+        for s, t in zip([0, 1000, 2000, 3000, 4000, 5000], target)
+    ]
 
 
 def _tiers():
-    return TierResults({
-        "offset_gripper": TierRow(Rate(0.44, 50), {25: Rate(0.74, 50), 100: Rate(0.60, 50), 800: Rate(0.98, 50)},
-                                  {"scratch": Rate(0.37, 50), "imagenet": Rate(0.47, 50)}),
-        "harsh_lighting": TierRow(Rate(0.32, 50), {25: Rate(0.23, 50), 100: Rate(0.52, 50), 800: Rate(0.63, 50)},
-                                  {"scratch": Rate(0.04, 50)}),
-    })
+    return TierResults(
+        {
+            "offset_gripper": TierRow(
+                Rate(0.44, 50),
+                {25: Rate(0.74, 50), 100: Rate(0.60, 50), 800: Rate(0.98, 50)},
+                {"scratch": Rate(0.37, 50), "imagenet": Rate(0.47, 50)},
+            ),
+            "harsh_lighting": TierRow(
+                Rate(0.32, 50),
+                {25: Rate(0.23, 50), 100: Rate(0.52, 50), 800: Rate(0.63, 50)},
+                {"scratch": Rate(0.04, 50)},
+            ),
+        }
+    )
 
 
 def _matrix():
     tasks = ["base", "harsh_lighting", "offset_gripper"]
-    return PerformanceMatrix(tasks, ["init", "harsh_lighting", "offset_gripper"],
-                             [[0.86, 0.31, 0.47], [0.84, 0.63, 0.50], [0.87, 0.58, 0.91]], [[50] * 3] * 3,
-                             single={"harsh_lighting": 0.63, "offset_gripper": 0.98})
+    return PerformanceMatrix(
+        tasks,
+        ["init", "harsh_lighting", "offset_gripper"],
+        [[0.86, 0.31, 0.47], [0.84, 0.63, 0.50], [0.87, 0.58, 0.91]],
+        [[50] * 3] * 3,
+        single={"harsh_lighting": 0.63, "offset_gripper": 0.98},
+    )
 
 
 def _assert_png(path, min_size=(300, 200)):
@@ -47,8 +73,9 @@ def _assert_png(path, min_size=(300, 200)):
 def test_report_writes_markdown_json_and_pngs(tmp_path):
     run = tmp_path / "run"
     write_curve(run / "finetune" / "curve.csv", _curve())
-    (run / "finetune" / "early_stop.json").write_text(json.dumps(
-        {"config": EarlyStopConfig(patience=2).to_dict(), "references": {"scratch (800 attempts)": 0.37}}))
+    (run / "finetune" / "early_stop.json").write_text(
+        json.dumps({"config": EarlyStopConfig(patience=2).to_dict(), "references": {"scratch (800 attempts)": 0.37}})
+    )
     _matrix().save(run / "matrix.json")
     _tiers().save(run / "tiers.json")
     res = write_report(run)
@@ -78,7 +105,7 @@ def test_report_writes_markdown_json_and_pngs(tmp_path):
 
 def test_report_reads_a_trainers_eval_jsonl(tmp_path):
     lines = [json.dumps({**r.to_dict(), "stop": False}) for r in _curve()]
-    (tmp_path / "eval.jsonl").write_text("\n".join(["{\"step\": 0, \"note\": \"no curve fields\"}", *lines]) + "\n")
+    (tmp_path / "eval.jsonl").write_text("\n".join(['{"step": 0, "note": "no curve fields"}', *lines]) + "\n")
     res = write_report(tmp_path, out_dir=tmp_path / "out")
     assert [p.name for p in res.figures] == ["curve.png"] and res.sections == ["eval.jsonl"]
     assert "| best | 3000 |" in res.markdown.read_text()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from nsl import keys
-from nsl.learners import ArraySampler, CemConfig, NetConfig, TrainConfig
+from nsl.learners import CemConfig, NetConfig, TrainConfig
 
 TINY_NET = NetConfig(image_size=16, conv_channels=(8, 8), conv_strides=(2, 2), hidden=16)
 TINY_CEM = CemConfig(samples=16, elites=4, iterations=2)
@@ -26,17 +26,25 @@ def colour_task(n: int, seed: int = 0, size: int = 16) -> dict[str, np.ndarray]:
     actions = rng.uniform(-1, 1, (n, 6)).astype(np.float32)
     success = np.where(red, actions[:, 0] > 0.5, actions[:, 0] < -0.5)
     states = rng.random((n, 6), dtype=np.float32)
-    return {keys.OBS_IMAGE: images, keys.OBS_STATE: states, keys.ACTION: actions,
-            keys.REWARD: success.astype(np.float32), keys.DONE: np.ones(n, np.float32),
-            keys.NEXT_OBS_IMAGE: images, keys.NEXT_OBS_STATE: states}
+    return {
+        keys.OBS_IMAGE: images,
+        keys.OBS_STATE: states,
+        keys.ACTION: actions,
+        keys.REWARD: success.astype(np.float32),
+        keys.DONE: np.ones(n, np.float32),
+        keys.NEXT_OBS_IMAGE: images,
+        keys.NEXT_OBS_STATE: states,
+    }
 
 
 def random_transitions(n: int, seed: int = 0, size: int = 16, done_rate: float = 0.3) -> dict[str, np.ndarray]:
     rng = np.random.default_rng(seed)
-    return {keys.OBS_IMAGE: rng.integers(0, 256, (n, size, size, 3), dtype=np.uint8),
-            keys.OBS_STATE: rng.random((n, 6), dtype=np.float32),
-            keys.ACTION: rng.uniform(-1, 1, (n, 6)).astype(np.float32),
-            keys.REWARD: (rng.random(n) < 0.3).astype(np.float32),
-            keys.DONE: (rng.random(n) < done_rate).astype(np.float32),
-            keys.NEXT_OBS_IMAGE: rng.integers(0, 256, (n, size, size, 3), dtype=np.uint8),
-            keys.NEXT_OBS_STATE: rng.random((n, 6), dtype=np.float32)}
+    return {
+        keys.OBS_IMAGE: rng.integers(0, 256, (n, size, size, 3), dtype=np.uint8),
+        keys.OBS_STATE: rng.random((n, 6), dtype=np.float32),
+        keys.ACTION: rng.uniform(-1, 1, (n, 6)).astype(np.float32),
+        keys.REWARD: (rng.random(n) < 0.3).astype(np.float32),
+        keys.DONE: (rng.random(n) < done_rate).astype(np.float32),
+        keys.NEXT_OBS_IMAGE: rng.integers(0, 256, (n, size, size, 3), dtype=np.uint8),
+        keys.NEXT_OBS_STATE: rng.random((n, 6), dtype=np.float32),
+    }

@@ -10,8 +10,12 @@ from nsl.cli import main
 
 
 def test_bench_learner_reports_rates_flops_and_peak(capsys):
+    import torch
+
+    threads = torch.get_num_threads()
     code = main(["bench", "learner", "--json", "--quick", "--steps", "1", "--baseline-steps", "1", "--threads", "1"])
     assert code == 0
+    assert torch.get_num_threads() == threads  # --threads applies to the bench only
     out = json.loads(capsys.readouterr().out)
     assert out["steps_per_s"] > 0 and out["baseline_steps_per_s"] > 0 and out["reuse_steps_per_s"] > 0
     assert out["speedup"] == pytest.approx(out["steps_per_s"] / out["baseline_steps_per_s"], rel=0.02)

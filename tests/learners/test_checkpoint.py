@@ -9,8 +9,15 @@ import pytest
 import torch
 
 from nsl.errors import CorruptDataError, IncompatibleVersionError, UnknownReferenceError
-from nsl.learners import (CONFIG_FILE, MODEL_FILE, TRAINER_FILE, checkpoint_id, load_checkpoint, read_config,
-                          save_checkpoint)
+from nsl.learners import (
+    CONFIG_FILE,
+    MODEL_FILE,
+    TRAINER_FILE,
+    checkpoint_id,
+    load_checkpoint,
+    read_config,
+    save_checkpoint,
+)
 
 
 def _copy(src, tmp_path):
@@ -41,8 +48,10 @@ def test_periodic_checkpoints_keep_the_trainer_state_of_the_newest_only(parent_c
     steps = sorted((parent_checkpoint.parent / "checkpoints").iterdir())
     assert [p.name for p in steps] == ["step-000000010", "step-000000020"]
     assert not (steps[0] / TRAINER_FILE).exists() and (steps[1] / TRAINER_FILE).exists()
-    assert torch.equal(load_checkpoint(steps[1]).net.columns[0].out.weight,
-                       load_checkpoint(parent_checkpoint).net.columns[0].out.weight)
+    assert torch.equal(
+        load_checkpoint(steps[1]).net.columns[0].out.weight,
+        load_checkpoint(parent_checkpoint).net.columns[0].out.weight,
+    )
 
 
 def test_checkpoint_id_is_a_content_hash(parent_checkpoint, tmp_path):

@@ -12,8 +12,15 @@ from nsl.learners import ArraySampler, CemConfig, NetConfig, load_policy, train
 @pytest.mark.parametrize("augment,pool", [(False, "flatten"), (True, "flatten"), (False, "spatial")])
 def test_greedy_cem_action_lands_in_the_only_successful_region(tmp_path, augment, pool):
     data = colour_task(2000)
-    cfg = tiny_train(steps=400, batch_size=32, lr=3e-3, checkpoint_every=400, log_every=100,
-                     augment_crop=2 if augment else 0, augment_colour=0.1 if augment else 0.0)
+    cfg = tiny_train(
+        steps=400,
+        batch_size=32,
+        lr=3e-3,
+        checkpoint_every=400,
+        log_every=100,
+        augment_crop=2 if augment else 0,
+        augment_colour=0.1 if augment else 0.0,
+    )
     net = NetConfig.from_dict({**TINY_NET.to_dict(), "pool": pool})
     result = train(cfg, ArraySampler.from_transitions(data), tmp_path / "run", net=net, progress=False)
     policy = load_policy(result.checkpoint, samples=64, elites=6, iterations=3)

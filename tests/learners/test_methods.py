@@ -34,8 +34,9 @@ def test_fine_tuning_starts_from_exactly_the_parent_at_a_quarter_of_its_lr(paren
     assert cfg["data"]["sources"][0]["name"] == "target"
 
 
-def test_a_fine_tune_has_the_recipes_conservative_term_unless_told_and_pre_training_has_none(parent_checkpoint,
-                                                                                                 tmp_path):
+def test_a_fine_tune_has_the_recipes_conservative_term_unless_told_and_pre_training_has_none(
+    parent_checkpoint, tmp_path
+):
     """The conservative term's weight resolves like the rate: FINE_TUNE_CONSERVATIVE with a parent, 0 without,
     an explicit value always; the checkpoint records the value the run used, and it reaches the loss."""
     from nsl.learners import FINE_TUNE_CONSERVATIVE
@@ -69,8 +70,14 @@ def test_fine_tuning_changes_every_column_weight(parent_checkpoint, tmp_path):
 
 
 def test_new_head_reinitialises_only_the_head(parent_checkpoint, tmp_path):
-    result = train(tiny_train(steps=0), TARGET, tmp_path / "nh", init_checkpoint=parent_checkpoint,
-                   method="new_head", progress=False)
+    result = train(
+        tiny_train(steps=0),
+        TARGET,
+        tmp_path / "nh",
+        init_checkpoint=parent_checkpoint,
+        method="new_head",
+        progress=False,
+    )
     parent, child = _weights(parent_checkpoint), _weights(result.checkpoint)
     head = [k for k in parent if is_head_parameter(k)]
     trunk = [k for k in parent if not is_head_parameter(k)]
@@ -82,8 +89,14 @@ def test_new_head_reinitialises_only_the_head(parent_checkpoint, tmp_path):
 
 @pytest.mark.parametrize("method", ["pnn", "ft_pnn"])
 def test_progressive_network_leaves_the_base_column_unchanged(parent_checkpoint, tmp_path, method):
-    result = train(tiny_train(steps=5, lr=1e-2), TARGET, tmp_path / method, init_checkpoint=parent_checkpoint,
-                   method=method, progress=False)
+    result = train(
+        tiny_train(steps=5, lr=1e-2),
+        TARGET,
+        tmp_path / method,
+        init_checkpoint=parent_checkpoint,
+        method=method,
+        progress=False,
+    )
     parent = load_checkpoint(parent_checkpoint).net
     child = load_checkpoint(result.checkpoint).net
     assert child.cfg.columns == 2 and child.columns[0].n_lateral == 0 and child.columns[1].n_lateral == 1
@@ -105,8 +118,14 @@ def test_ft_pnn_starts_as_the_parent_function_and_pnn_does_not(parent_checkpoint
     image, state, action = _inputs()
     outs = {}
     for method in ("ft_pnn", "pnn"):
-        result = train(tiny_train(steps=0), TARGET, tmp_path / method, init_checkpoint=parent_checkpoint,
-                       method=method, progress=False)
+        result = train(
+            tiny_train(steps=0),
+            TARGET,
+            tmp_path / method,
+            init_checkpoint=parent_checkpoint,
+            method=method,
+            progress=False,
+        )
         with torch.no_grad():
             outs[method] = load_checkpoint(result.checkpoint).net(image, state, action)
     with torch.no_grad():
@@ -116,8 +135,9 @@ def test_ft_pnn_starts_as_the_parent_function_and_pnn_does_not(parent_checkpoint
 
 
 def test_scratch_ignores_the_parent_weights_and_keeps_its_lr(parent_checkpoint, tmp_path):
-    result = train(tiny_train(steps=0), TARGET, tmp_path / "s", init_checkpoint=parent_checkpoint,
-                   method="scratch", progress=False)
+    result = train(
+        tiny_train(steps=0), TARGET, tmp_path / "s", init_checkpoint=parent_checkpoint, method="scratch", progress=False
+    )
     parent, child = _weights(parent_checkpoint), _weights(result.checkpoint)
     assert parent.keys() == child.keys() and not any(torch.equal(parent[k], child[k]) for k in parent)
     assert load_checkpoint(result.checkpoint).config["training"]["lr"] == pytest.approx(1e-3)
@@ -135,8 +155,9 @@ def test_bad_method_arguments_are_refused(parent_checkpoint, tmp_path):
 def test_new_head_of_a_spatial_network_reinitialises_its_spatial_layers_only(random_sampler, tmp_path):
     net = NetConfig.from_dict({**TINY_NET.to_dict(), "pool": "spatial"})
     parent = train(tiny_train(steps=2), random_sampler, tmp_path / "p", net=net, progress=False).checkpoint
-    result = train(tiny_train(steps=0), TARGET, tmp_path / "nh", init_checkpoint=parent, method="new_head",
-                   progress=False)
+    result = train(
+        tiny_train(steps=0), TARGET, tmp_path / "nh", init_checkpoint=parent, method="new_head", progress=False
+    )
     before, after = _weights(parent), _weights(result.checkpoint)
     head = {k.split(".")[2] for k in before if is_head_parameter(k)}
     assert head == {"state_fc", "state_proj", "spatial_fc", "action_fc", "hidden_fcs", "out"}
@@ -180,8 +201,13 @@ def test_shrink_perturb_starts_from_alpha_parent_plus_sigma_fresh_init(parent_ch
         assert torch.allclose(child[k], 0.8 * parent[k] + 0.01 * fresh[k], atol=1e-7), k
     assert load_checkpoint(result.checkpoint).config["training"]["shrink_perturb"] == [0.8, 0.01]
     # alpha 1, sigma 0 is the parent itself
-    same = train(tiny_train(steps=0, shrink_perturb=(1.0, 0.0)), TARGET, tmp_path / "same",
-                 init_checkpoint=parent_checkpoint, progress=False)
+    same = train(
+        tiny_train(steps=0, shrink_perturb=(1.0, 0.0)),
+        TARGET,
+        tmp_path / "same",
+        init_checkpoint=parent_checkpoint,
+        progress=False,
+    )
     assert all(torch.equal(parent[k], v) for k, v in _weights(same.checkpoint).items())
 
 

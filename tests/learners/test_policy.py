@@ -15,8 +15,10 @@ from nsl.learners import CEMPolicy, load_policy
 
 def _obs(n: int, seed: int = 0) -> dict[str, np.ndarray]:
     rng = np.random.default_rng(seed)
-    return {"image": rng.integers(0, 256, (n, 16, 16, 3), dtype=np.uint8),
-            "state": rng.random((n, 6), dtype=np.float32)}
+    return {
+        "image": rng.integers(0, 256, (n, 16, 16, 3), dtype=np.uint8),
+        "state": rng.random((n, 6), dtype=np.float32),
+    }
 
 
 def test_policy_acts_in_the_active_dims_and_fills_the_others(parent_checkpoint):
@@ -72,9 +74,9 @@ def test_greedy_actions_and_q_values_are_the_same_bits_in_any_batch_and_thread_c
         torch.set_num_threads(1)
         for size in (1, 4):
             for s in range(0, n, size):
-                part = policy.greedy({k: v[s:s + size] for k, v in obs.items()}, rngs(range(s, min(s + size, n))))
-                np.testing.assert_array_equal(part[0], batch[0][s:s + size])  # actions
-                np.testing.assert_array_equal(part[1], batch[1][s:s + size])  # their Q logits, to the last bit
+                part = policy.greedy({k: v[s : s + size] for k, v in obs.items()}, rngs(range(s, min(s + size, n))))
+                np.testing.assert_array_equal(part[0], batch[0][s : s + size])  # actions
+                np.testing.assert_array_equal(part[1], batch[1][s : s + size])  # their Q logits, to the last bit
     finally:
         torch.set_num_threads(threads)
 

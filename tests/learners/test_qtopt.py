@@ -5,14 +5,22 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from learner_factories import TINY_CEM, TINY_NET, random_transitions, tiny_train
 
 from nsl import keys
 from nsl.errors import ConfigError
-from nsl.learners import (ArraySampler, CemConfig, Learner, QNetwork, bellman_target, cem_maximize,
-                          noise_from_generator, train, update)
+from nsl.learners import (
+    ArraySampler,
+    CemConfig,
+    Learner,
+    QNetwork,
+    bellman_target,
+    cem_maximize,
+    noise_from_generator,
+    train,
+    update,
+)
 from nsl.learners.qtopt import batch_to_torch
-
-from learner_factories import TINY_CEM, TINY_NET, random_transitions, tiny_train
 
 
 def _constant(net: QNetwork, p: float) -> QNetwork:
@@ -142,7 +150,10 @@ def test_conservative_term_keeps_unseen_actions_below_the_data_actions():
 
         with torch.no_grad():
             img = prepare_images(batch[keys.OBS_IMAGE], 0, 0.0, None)
-            q = lambda a: torch.sigmoid(learner.online(img, batch[keys.OBS_STATE], active_actions(a, TINY_NET))).mean()
+
+            def q(a):
+                return torch.sigmoid(learner.online(img, batch[keys.OBS_STATE], active_actions(a, TINY_NET))).mean()
+
             return float(q(batch[keys.ACTION])), float(q(unseen))
 
     plain_data, plain_unseen = q_after_training(0.0)

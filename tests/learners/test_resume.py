@@ -72,8 +72,14 @@ def test_eval_hook_is_called_every_k_steps_and_can_stop_the_run(random_sampler, 
         calls.append((step, actions.shape))
         return {"success": 0.5, "stop": step >= 6}
 
-    result = train(tiny_train(steps=20, eval_every=3), random_sampler, tmp_path / "run", net=TINY_NET,
-                   eval_fn=eval_fn, progress=False)
+    result = train(
+        tiny_train(steps=20, eval_every=3),
+        random_sampler,
+        tmp_path / "run",
+        net=TINY_NET,
+        eval_fn=eval_fn,
+        progress=False,
+    )
     assert [c[0] for c in calls] == [0, 3, 6] and calls[0][1] == (2, 6)
     assert result.stopped_early and result.step == 6
     assert load_checkpoint(result.checkpoint).step == 6

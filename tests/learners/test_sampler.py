@@ -14,18 +14,28 @@ from nsl.learners import ArraySampler
 
 
 def _episode(t, value, terminated=True):
-    return SimpleNamespace(images=np.full((t, 4, 4, 3), value, np.uint8),
-                           states=np.stack([np.zeros(t), np.arange(t), *np.zeros((4, t))], 1).astype(np.float32),
-                           actions=np.zeros((t, 6), np.float32),
-                           rewards=np.eye(t, dtype=np.float32)[-1] * (value % 2), terminated=terminated)
+    return SimpleNamespace(
+        images=np.full((t, 4, 4, 3), value, np.uint8),
+        states=np.stack([np.zeros(t), np.arange(t), *np.zeros((4, t))], 1).astype(np.float32),
+        actions=np.zeros((t, 6), np.float32),
+        rewards=np.eye(t, dtype=np.float32)[-1] * (value % 2),
+        terminated=terminated,
+    )
 
 
 def test_episodes_become_transitions_with_next_observations():
     s = ArraySampler.from_episodes([_episode(3, 1), _episode(2, 2), _episode(2, 5, terminated=False)])
     assert len(s) == 3 + 2 + 1  # the truncated episode's last transition has no next observation
     batch = s.sample(200, np.random.default_rng(0))
-    assert set(batch) == {keys.OBS_IMAGE, keys.OBS_STATE, keys.ACTION, keys.REWARD, keys.DONE,
-                          keys.NEXT_OBS_IMAGE, keys.NEXT_OBS_STATE}
+    assert set(batch) == {
+        keys.OBS_IMAGE,
+        keys.OBS_STATE,
+        keys.ACTION,
+        keys.REWARD,
+        keys.DONE,
+        keys.NEXT_OBS_IMAGE,
+        keys.NEXT_OBS_STATE,
+    }
     live = batch[keys.DONE] == 0
     # within an episode the next frame is one step later and shows the same episode
     assert np.all(batch[keys.NEXT_OBS_STATE][live, 1] == batch[keys.OBS_STATE][live, 1] + 1)
@@ -47,5 +57,6 @@ def test_inconsistent_arrays_are_refused():
     with pytest.raises(ConfigError, match="lack key"):
         ArraySampler.from_transitions({k: v for k, v in t.items() if k != keys.REWARD})
     with pytest.raises(ConfigError, match=r"actions has shape \(4, 5\)"):
-        ArraySampler(t[keys.OBS_IMAGE], t[keys.OBS_STATE], t[keys.ACTION][:, :5], t[keys.REWARD], t[keys.DONE],
-                     np.arange(4))
+        ArraySampler(
+            t[keys.OBS_IMAGE], t[keys.OBS_STATE], t[keys.ACTION][:, :5], t[keys.REWARD], t[keys.DONE], np.arange(4)
+        )

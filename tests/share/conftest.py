@@ -7,11 +7,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
+from fake_hub import FakeHfApi, FakeHub
 
 from tests.conftest import run_cli
 from tests.datasets.conftest import SYNTH_SPEC, synth_episode
-
-from fake_hub import FakeHfApi, FakeHub
 
 TINY_NET = ["--net", "image_size=16", "--net", "conv_channels=8,8", "--net", "conv_strides=2,2", "--net", "hidden=16"]
 
@@ -41,10 +40,28 @@ def publisher(publisher_home, monkeypatch):
 
         write_synth("grasp-syn", [3, 4, 5, 3, 4])
         write_synth("base-syn", [4, 3, 4, 5])
-        assert run_cli("train", "--data", "base-syn", "--steps", "2", "--batch-size", "8", "--name", "base-syn",
-                       *TINY_NET) == 0
-        assert run_cli("train", "--data", "base-syn=0.5", "--data", "grasp-syn=0.5", "--init", "ckpt:base-syn",
-                       "--steps", "2", "--batch-size", "8", "--name", "ft-syn") == 0
+        assert (
+            run_cli("train", "--data", "base-syn", "--steps", "2", "--batch-size", "8", "--name", "base-syn", *TINY_NET)
+            == 0
+        )
+        assert (
+            run_cli(
+                "train",
+                "--data",
+                "base-syn=0.5",
+                "--data",
+                "grasp-syn=0.5",
+                "--init",
+                "ckpt:base-syn",
+                "--steps",
+                "2",
+                "--batch-size",
+                "8",
+                "--name",
+                "ft-syn",
+            )
+            == 0
+        )
         with Catalog() as cat:
             cat.add_evaluation("ckpt:ft-syn", "synthetic", episodes=20, successes=9, seed=5)
         write_synth("grasp-syn", [2, 3], start=5)  # v2 appends two episodes

@@ -61,8 +61,9 @@ class FakeHub:
         out.write_bytes(files[filename])
         return str(out)
 
-    def snapshot(self, repo_id, *, repo_type=None, revision=None, local_dir=None, allow_patterns=None,
-                 ignore_patterns=None, **kw) -> str:
+    def snapshot(
+        self, repo_id, *, repo_type=None, revision=None, local_dir=None, allow_patterns=None, ignore_patterns=None, **kw
+    ) -> str:
         files = self.snapshot_at(repo_id, repo_type, revision)
 
         def match(path: str, patterns) -> bool:
@@ -96,8 +97,11 @@ class FakeHfApi:
 
     def list_repo_refs(self, repo_id, *, repo_type=None, **kw) -> GitRefs:
         r = self.hub.repo(repo_id, repo_type)
-        return GitRefs(branches=[GitRefInfo(n, f"refs/heads/{n}", c) for n, c in r.branches.items()], converts=[],
-                       tags=[GitRefInfo(n, f"refs/tags/{n}", c) for n, c in r.tags.items()])
+        return GitRefs(
+            branches=[GitRefInfo(n, f"refs/heads/{n}", c) for n, c in r.branches.items()],
+            converts=[],
+            tags=[GitRefInfo(n, f"refs/tags/{n}", c) for n, c in r.tags.items()],
+        )
 
     def create_commit(self, repo_id, operations, *, commit_message, repo_type=None, revision=None, **kw):
         r = self.hub.repo(repo_id, repo_type)

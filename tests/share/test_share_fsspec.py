@@ -59,21 +59,40 @@ def test_round_trip_into_an_empty_workspace(publisher, remote, workspace_b, lero
     assert run_cli("catalog", "lineage", "ckpt:ft-syn") == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[1].startswith(f"├─ origin: pulled from {remote}/ft-syn (revision {ft.id})")
-    assert any(line.startswith("├─ data: base-syn@v1 (synthetic, 4 episodes, hash ") and
-               "published, not in this workspace), weight 0.5" in line for line in lines)
-    assert f"├─ data: grasp-syn@v1 (synthetic, 5 episodes, pulled from {remote}/grasp-syn at v1), weight 0.5" \
-        in lines
-    assert any(line.startswith(f"└─ from base-syn@2  {base.short_id}  trained for synthetic (published lineage")
-               for line in lines)
+    assert any(
+        line.startswith("├─ data: base-syn@v1 (synthetic, 4 episodes, hash ")
+        and "published, not in this workspace), weight 0.5" in line
+        for line in lines
+    )
+    assert f"├─ data: grasp-syn@v1 (synthetic, 5 episodes, pulled from {remote}/grasp-syn at v1), weight 0.5" in lines
+    assert any(
+        line.startswith(f"└─ from base-syn@2  {base.short_id}  trained for synthetic (published lineage")
+        for line in lines
+    )
     assert lines[-1] == "   └─ from scratch (no parent)"
-    assert any(line.startswith("├─ eval: synthetic (test objects) 45.0% [") and line.endswith("(published)")
-               for line in lines)
+    assert any(
+        line.startswith("├─ eval: synthetic (test objects) 45.0% [") and line.endswith("(published)") for line in lines
+    )
     card = (Path(entry.path) / "README.md").read_text()
     assert f"fine-tuned from `base-syn@2` (`{base.short_id}`)" in card and v1.hash in card
     assert "the evaluations it was published with" in card and "| synthetic | test | 20 | 45.0% |" in card
     # the pulled checkpoint fine-tunes like a local one
-    assert run_cli("train", "--data", "grasp-syn", "--init", "ckpt:ft-syn", "--steps", "2", "--batch-size", "8",
-                   "--name", "ft2") == 0
+    assert (
+        run_cli(
+            "train",
+            "--data",
+            "grasp-syn",
+            "--init",
+            "ckpt:ft-syn",
+            "--steps",
+            "2",
+            "--batch-size",
+            "8",
+            "--name",
+            "ft2",
+        )
+        == 0
+    )
     with Catalog() as cat:
         child = cat.resolve_checkpoint("ckpt:ft2")
         assert child.parent == ft.id
@@ -108,8 +127,9 @@ def test_a_second_push_of_the_same_version_uploads_nothing(publisher, s3, s3_ser
 
     files = sorted(api.open_version("grasp-syn@v1").manifest["files"])
     bucket = s3.removeprefix("s3://")
-    assert sorted(first) == sorted(f"/{bucket}/lab/grasp-syn/v1/{rel}" for rel in [*files, "README.md",
-                                                                                      "manifest.json"])
+    assert sorted(first) == sorted(
+        f"/{bucket}/lab/grasp-syn/v1/{rel}" for rel in [*files, "README.md", "manifest.json"]
+    )
     assert first[-1] == f"/{bucket}/lab/grasp-syn/v1/manifest.json"  # the manifest goes last
     capsys.readouterr()
     before = len(s3_server.requests)
@@ -168,8 +188,7 @@ def test_a_killed_pull_resumes_and_skips_verified_files(publisher, tmp_path, wor
     assert not (workspace.datasets_dir() / "grasp-syn").exists()  # nothing half-written in the workspace
     first = list(fetched)
     fetched.clear()
-    monkeypatch.setattr(FsRemote, "fetch", lambda self, rel, dest: (real_fetch(self, rel, dest),
-                                                                    fetched.append(rel)))
+    monkeypatch.setattr(FsRemote, "fetch", lambda self, rel, dest: (real_fetch(self, rel, dest), fetched.append(rel)))
     capsys.readouterr()
     assert run_cli("pull", f"{remote}/grasp-syn") == 0
     assert "4 already verified" in capsys.readouterr().out
@@ -181,14 +200,17 @@ def test_a_killed_pull_resumes_and_skips_verified_files(publisher, tmp_path, wor
 
 def test_hugging_face_datasets_reads_the_pushed_frames(publisher, tmp_path, monkeypatch):
     import datasets as hf_datasets
-
     from nsl.datasets import api
 
     monkeypatch.setenv("HF_HUB_OFFLINE", "1")
     monkeypatch.setattr(hf_datasets.config, "HF_DATASETS_CACHE", tmp_path / "cache")
     assert run_cli("push", "data:grasp-syn@v1", str(tmp_path / "remote")) == 0
-    ds = hf_datasets.load_dataset("parquet", data_files=str(tmp_path / "remote" / "v1" / "data" / "*" / "*.parquet"),
-                                  split="train", cache_dir=str(tmp_path / "cache"))
+    ds = hf_datasets.load_dataset(
+        "parquet",
+        data_files=str(tmp_path / "remote" / "v1" / "data" / "*" / "*.parquet"),
+        split="train",
+        cache_dir=str(tmp_path / "cache"),
+    )
     want = api.open_version("grasp-syn@v1").view().read_columns()
     assert len(ds) == len(want["index"])
     assert [r[0] if isinstance(r, list) else r for r in ds["index"]] == want["index"].tolist()
@@ -197,13 +219,15 @@ def test_hugging_face_datasets_reads_the_pushed_frames(publisher, tmp_path, monk
 
 
 def test_bad_references_and_destinations_fail_in_one_line(publisher, tmp_path, capsys):
-    cases = [(["push", "grasp-syn@v1", str(tmp_path)], "needs a prefix: data:NAME@vN"),
-             (["push", "data:grasp-syn@v1:2", str(tmp_path)], "is a tier; push whole versions"),
-             (["push", "data:grasp-syn@v1", "hf://someone/grasp"], "is a model repository"),
-             (["push", "ckpt:ft-syn", "hf://datasets/someone/ft"], "is a dataset repository"),
-             (["push", "data:grasp-syn@v1", f"{tmp_path}@v3"], "names a revision"),
-             (["pull", str(tmp_path / "nothing")], "holds no checkpoint"),
-             (["pull", "hf://spaces/a/b"], "is a Space")]
+    cases = [
+        (["push", "grasp-syn@v1", str(tmp_path)], "needs a prefix: data:NAME@vN"),
+        (["push", "data:grasp-syn@v1:2", str(tmp_path)], "is a tier; push whole versions"),
+        (["push", "data:grasp-syn@v1", "hf://someone/grasp"], "is a model repository"),
+        (["push", "ckpt:ft-syn", "hf://datasets/someone/ft"], "is a dataset repository"),
+        (["push", "data:grasp-syn@v1", f"{tmp_path}@v3"], "names a revision"),
+        (["pull", str(tmp_path / "nothing")], "holds no checkpoint"),
+        (["pull", "hf://spaces/a/b"], "is a Space"),
+    ]
     for argv, message in cases:
         capsys.readouterr()
         assert run_cli(*argv) == 2, argv

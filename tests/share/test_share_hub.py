@@ -14,8 +14,9 @@ def _changed(new: dict, old: dict) -> list[str]:
     return sorted(rel for rel, f in new["files"].items() if (old["files"].get(rel) or {}).get("sha256") != f["sha256"])
 
 
-def test_dataset_versions_are_commits_with_tags_that_lerobot_loads(publisher, hub, lerobot, workspace_b, tmp_path,
-                                                                   capsys):
+def test_dataset_versions_are_commits_with_tags_that_lerobot_loads(
+    publisher, hub, lerobot, workspace_b, tmp_path, capsys
+):
     from nsl.datasets import api
 
     v1, v2 = api.open_version("grasp-syn@v1"), api.open_version("grasp-syn@v2")
@@ -73,8 +74,9 @@ def test_a_checkpoint_is_a_model_repo_and_pulls_with_its_origin(publisher, hub, 
     capsys.readouterr()
     assert run_cli("pull", "hf://lab/ft-syn", "--as", "theirs") == 0
     commit = repo.branches["main"]
-    assert sorted(hub.downloads) == sorted(("lab/ft-syn", f, commit) for f in
-                                           ("manifest.json", "model.safetensors", "config.json"))
+    assert sorted(hub.downloads) == sorted(
+        ("lab/ft-syn", f, commit) for f in ("manifest.json", "model.safetensors", "config.json")
+    )
     with Catalog() as cat:
         entry = cat.resolve_checkpoint("ckpt:theirs")
         o = origin_of(cat, "checkpoint", entry.id)
@@ -115,10 +117,13 @@ def test_an_altered_hub_file_is_refused_and_a_killed_pull_resumes(publisher, hub
     assert sorted(f for _, f, _ in hub.downloads) == ["manifest.json", "model.safetensors"]
 
 
-@pytest.mark.parametrize("src, message", [
-    ("hf://datasets/lab/nope", "does not exist or this account may not access it"),
-    (f"hf://datasets/{REPO}@v9", "has no revision 'v9'"),
-])
+@pytest.mark.parametrize(
+    "src, message",
+    [
+        ("hf://datasets/lab/nope", "does not exist or this account may not access it"),
+        (f"hf://datasets/{REPO}@v9", "has no revision 'v9'"),
+    ],
+)
 def test_hub_errors_are_one_line(publisher, hub, src, message, capsys):
     assert run_cli("push", "data:grasp-syn@v1", f"hf://datasets/{REPO}") == 0
     capsys.readouterr()

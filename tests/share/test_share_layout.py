@@ -20,8 +20,10 @@ FOLDERS = ("collectors", "datasets", "learners", "eval", "catalog")
 def test_share_is_packaged_and_imports_no_folder():
     conf = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
     assert "nsl.share" in conf["packages"] and conf["package-dir"]["nsl.share"] == "share"
-    code = ("import sys, nsl.share; "
-            f"print(sorted(m for m in sys.modules if m.split('.')[:2] in [['nsl', f] for f in {FOLDERS!r}]))")
+    code = (
+        "import sys, nsl.share; "
+        f"print(sorted(m for m in sys.modules if m.split('.')[:2] in [['nsl', f] for f in {FOLDERS!r}]))"
+    )
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
@@ -30,13 +32,16 @@ def test_share_is_packaged_and_imports_no_folder():
             assert not re.search(r"\bnsl\.share\b|from \.\.share", path.read_text()), path
 
 
-@pytest.mark.parametrize("text, url, revision, repo", [
-    ("hf://datasets/lab/grasp@v2", "hf://datasets/lab/grasp", "v2", ("lab/grasp", "dataset")),
-    ("hf://lab/ft-harsh", "hf://lab/ft-harsh", None, ("lab/ft-harsh", "model")),
-    ("hf://models/lab/ft@main", "hf://lab/ft", "main", ("lab/ft", "model")),
-    ("s3://bucket/shared/grasp@v1", "s3://bucket/shared/grasp", "v1", (None, None)),
-    ("file:///srv/my@data/grasp/", "file:///srv/my@data/grasp", None, (None, None)),
-])
+@pytest.mark.parametrize(
+    "text, url, revision, repo",
+    [
+        ("hf://datasets/lab/grasp@v2", "hf://datasets/lab/grasp", "v2", ("lab/grasp", "dataset")),
+        ("hf://lab/ft-harsh", "hf://lab/ft-harsh", None, ("lab/ft-harsh", "model")),
+        ("hf://models/lab/ft@main", "hf://lab/ft", "main", ("lab/ft", "model")),
+        ("s3://bucket/shared/grasp@v1", "s3://bucket/shared/grasp", "v1", (None, None)),
+        ("file:///srv/my@data/grasp/", "file:///srv/my@data/grasp", None, (None, None)),
+    ],
+)
 def test_remote_addresses(text, url, revision, repo):
     loc = parse_remote(text)
     assert (loc.url, loc.revision, (loc.repo_id, loc.repo_type)) == (url, revision, repo)

@@ -62,6 +62,11 @@ holdout = 0.25
 """
 
 
+# Torch threads of every mini study run: Q-values (and so the held-out TD error the records keep) are float sums
+# whose last bits depend on how many threads add them up, and earlier tests may have changed this process's count.
+STUDY_THREADS = 2
+
+
 @pytest.fixture(scope="session")
 def mini_plan(tmp_path_factory):
     path = tmp_path_factory.mktemp("plans") / "mini.toml"
@@ -77,9 +82,16 @@ def mini_home(tmp_path_factory):
 @pytest.fixture
 def mini_run(mini_plan, mini_home, monkeypatch):
     """The mini plan run once, uninterrupted, through the real CLI (shared by the tests of this folder)."""
+    import torch
+
     from tests.conftest import run_cli
 
     monkeypatch.setenv("NSL_HOME", str(mini_home))
     if not (mini_home / "studies" / "mini" / "report.md").is_file():
-        assert run_cli("study", "run", str(mini_plan), "--quiet") == 0
+        threads = torch.get_num_threads()
+        torch.set_num_threads(STUDY_THREADS)  # as the killed run's process (OMP_NUM_THREADS): the same float sums
+        try:
+            assert run_cli("study", "run", str(mini_plan), "--quiet") == 0
+        finally:
+            torch.set_num_threads(threads)
     return mini_home

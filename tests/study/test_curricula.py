@@ -14,10 +14,18 @@ from tests.conftest import run_cli
 from tests.study.test_transfer import MINI_TRANSFER
 
 THREE = {
-    "name": "x3", "study": "s", "steps": 4, "every": 2, "eval_episodes": 10, "seeds": [0, 1],
-    "tasks": [{"shift": "base", "checkpoint": "ckpt:base", "data": "d-base", "episodes": 6},
-              {"shift": "harsh_lighting", "checkpoint": "ckpt:harsh", "data": "d-harsh", "episodes": 8},
-              {"shift": "offset_gripper", "checkpoint": "ckpt:offset", "data": "d-offset", "episodes": 8}]}
+    "name": "x3",
+    "study": "s",
+    "steps": 4,
+    "every": 2,
+    "eval_episodes": 10,
+    "seeds": [0, 1],
+    "tasks": [
+        {"shift": "base", "checkpoint": "ckpt:base", "data": "d-base", "episodes": 6},
+        {"shift": "harsh_lighting", "checkpoint": "ckpt:harsh", "data": "d-harsh", "episodes": 8},
+        {"shift": "offset_gripper", "checkpoint": "ckpt:offset", "data": "d-offset", "episodes": 8},
+    ],
+}
 CHAIN = {"base": SCRATCH, "harsh_lighting": "base", "offset_gripper": "harsh_lighting"}
 
 
@@ -56,19 +64,36 @@ def test_a_chain_fine_tunes_each_task_from_the_checkpoint_the_curriculum_made_fo
 
 def test_measured_costs_and_the_independence_check_on_known_curves():
     plan, cplan, _ = _units({"optimal": CHAIN, "pessimal": {t: SCRATCH for t in CHAIN}})
-    matrix = matrix_from_dict({"tasks": ["base", "harsh_lighting", "offset_gripper"], "base": "base", "advantage": {
-        "base": {"harsh_lighting": 3.0, "offset_gripper": 2.0}, "harsh_lighting": {"base": 0.5, "offset_gripper": 4.0},
-        "offset_gripper": {"base": 0.5, "harsh_lighting": 1.5}}})
-    auc = {"scratch-harsh-lighting-n8-k4-s2": 0.1, "scratch-harsh-lighting-n8-k4-s3": 0.2,
-           "scratch-offset-gripper-n8-k4-s2": 0.1, "scratch-offset-gripper-n8-k4-s3": 0.01,  # floored at 1/10
-           "ft-base-to-harsh-lighting-n8-k4-s2": 0.3, "ft-base-to-harsh-lighting-n8-k4-s3": 0.4,
-           "ft-via-0-1-to-offset-gripper-n8-k4-s2": 0.2,
-           "ft-via-0-1-to-offset-gripper-n8-k4-s3": 0.2,
-           "ft-harsh-lighting-to-offset-gripper-n8-k4-s2": 0.4, "ft-harsh-lighting-to-offset-gripper-n8-k4-s3": 0.5}
+    matrix = matrix_from_dict(
+        {
+            "tasks": ["base", "harsh_lighting", "offset_gripper"],
+            "base": "base",
+            "advantage": {
+                "base": {"harsh_lighting": 3.0, "offset_gripper": 2.0},
+                "harsh_lighting": {"base": 0.5, "offset_gripper": 4.0},
+                "offset_gripper": {"base": 0.5, "harsh_lighting": 1.5},
+            },
+        }
+    )
+    auc = {
+        "scratch-harsh-lighting-n8-k4-s2": 0.1,
+        "scratch-harsh-lighting-n8-k4-s3": 0.2,
+        "scratch-offset-gripper-n8-k4-s2": 0.1,
+        "scratch-offset-gripper-n8-k4-s3": 0.01,  # floored at 1/10
+        "ft-base-to-harsh-lighting-n8-k4-s2": 0.3,
+        "ft-base-to-harsh-lighting-n8-k4-s3": 0.4,
+        "ft-via-0-1-to-offset-gripper-n8-k4-s2": 0.2,
+        "ft-via-0-1-to-offset-gripper-n8-k4-s3": 0.2,
+        "ft-harsh-lighting-to-offset-gripper-n8-k4-s2": 0.4,
+        "ft-harsh-lighting-to-offset-gripper-n8-k4-s3": 0.5,
+    }
     out = measure(plan, cplan, matrix, auc.get, lambda tag: 0.5 if tag in auc else None)
     opt = out["trees"]["optimal"]
-    assert [(e["from"], e["to"]) for e in opt["edges"]] == [(SCRATCH, "base"), ("base", "harsh_lighting"),
-                                                             ("harsh_lighting", "offset_gripper")]
+    assert [(e["from"], e["to"]) for e in opt["edges"]] == [
+        (SCRATCH, "base"),
+        ("base", "harsh_lighting"),
+        ("harsh_lighting", "offset_gripper"),
+    ]
     assert opt["predicted"] == pytest.approx(-(1 + 3 + 4))
     a_harsh = {2: 0.3 / 0.1, 3: 0.4 / 0.2}
     a_offset = {2: 0.2 / 0.1, 3: 0.2 / 0.1}

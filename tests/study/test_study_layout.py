@@ -11,8 +11,9 @@ FOLDERS = ("collectors", "datasets", "learners", "eval", "catalog")
 
 def test_the_five_folders_never_import_the_study():
     pattern = re.compile(r"^\s*(from|import)\s+(nsl\.study|study)\b", re.M)
-    offenders = [str(p.relative_to(ROOT)) for f in FOLDERS for p in (ROOT / f).rglob("*.py")
-                 if pattern.search(p.read_text())]
+    offenders = [
+        str(p.relative_to(ROOT)) for f in FOLDERS for p in (ROOT / f).rglob("*.py") if pattern.search(p.read_text())
+    ]
     assert offenders == []
 
 

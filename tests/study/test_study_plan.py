@@ -24,25 +24,43 @@ def _outputs(home) -> list[str]:
 
     Resolving ``ckpt:base`` registers the checkpoint shipped with nsl (``checkpoints/base``): not a unit output.
     """
-    return sorted(str(p.relative_to(home)) for sub in ("datasets", "runs", "checkpoints", "studies")
-                  if (home / sub).exists() for p in (home / sub).rglob("*")
-                  if not str(p.relative_to(home)).startswith("checkpoints/base"))
+    return sorted(
+        str(p.relative_to(home))
+        for sub in ("datasets", "runs", "checkpoints", "studies")
+        if (home / sub).exists()
+        for p in (home / sub).rglob("*")
+        if not str(p.relative_to(home)).startswith("checkpoints/base")
+    )
 
 
-@pytest.mark.parametrize("change, message", [
-    (("shifts = [\"harsh_lighting\", \"offset_gripper\"]", "shifts = [\"harsh_lighting\", \"offset_griper\"]"),
-     "plan shifts: unknown shift 'offset_griper'; did you mean 'offset_gripper'"),
-    (("tiers = [4, 8]", "tiers = [4, 8, 16]"),
-     "plan finetune.tiers has tier 16 above the collection size collect.episodes = 8"),
-    (("baselines = [\"scratch\"]", "baselines = [\"scratch\", \"imagenet\"]"), "unknown method 'imagenet'"),
-    (("methods = [\"ft\"]", "methods = [\"ft\", \"pnn2\"]"), "unknown method 'pnn2'"),
-    (("criteria = [\"eval\", \"softopc\", \"auc\", \"td\"]", "criteria = [\"eval\", \"opc\"]"),
-     "unknown stopping criterion 'opc'"),
-    (("source = \"plan\"\n", "source = \"checkpoint\"\n"),
-     "base data grasp-base-oracle@v1 (sha256:34692b25313d...) of ckpt:base is not in $NSL_HOME and the plan has no "
-     "recipe"),
-    (("[eval]\nepisodes = 4", "[eval]\nepisodes = 4\nepisode = 5"), "plan [eval] has unknown setting(s) ['episode']"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (
+            ('shifts = ["harsh_lighting", "offset_gripper"]', 'shifts = ["harsh_lighting", "offset_griper"]'),
+            "plan shifts: unknown shift 'offset_griper'; did you mean 'offset_gripper'",
+        ),
+        (
+            ("tiers = [4, 8]", "tiers = [4, 8, 16]"),
+            "plan finetune.tiers has tier 16 above the collection size collect.episodes = 8",
+        ),
+        (('baselines = ["scratch"]', 'baselines = ["scratch", "imagenet"]'), "unknown method 'imagenet'"),
+        (('methods = ["ft"]', 'methods = ["ft", "pnn2"]'), "unknown method 'pnn2'"),
+        (
+            ('criteria = ["eval", "softopc", "auc", "td"]', 'criteria = ["eval", "opc"]'),
+            "unknown stopping criterion 'opc'",
+        ),
+        (
+            ('source = "plan"\n', 'source = "checkpoint"\n'),
+            "base data grasp-base-oracle@v1 (sha256:34692b25313d...) of ckpt:base is not in $NSL_HOME and the plan "
+            "has no recipe",
+        ),
+        (
+            ("[eval]\nepisodes = 4", "[eval]\nepisodes = 4\nepisode = 5"),
+            "plan [eval] has unknown setting(s) ['episode']",
+        ),
+    ],
+)
 def test_bad_plan_is_refused_in_one_line_before_any_work(tmp_path, nsl_home, capsys, change, message):
     old, new = change
     assert old in MINI_PLAN
@@ -63,10 +81,14 @@ def test_missing_base_data_is_refused_when_the_plan_cannot_collect_it(tmp_path, 
 def test_a_recipe_for_recorded_base_data_must_match_the_record(tmp_path, nsl_home):
     """With the base's own data as source, a recipe of another size is refused (its hash could not match)."""
     text = MINI_PLAN.replace('source = "plan"\n', 'source = "checkpoint"\n').replace(
-        'name = "mini-base-oracle"', 'name = "grasp-base-oracle"')
+        'name = "mini-base-oracle"', 'name = "grasp-base-oracle"'
+    )
     for name, policy, seed in (("grasp-base-noisy", "oracle:1.0", 2), ("grasp-base-random", "random", 3)):
-        text = text.replace("[collect]", f'[[base_data.datasets]]\nname = "{name}"\npolicy = "{policy}"\n'
-                                         f"seed = {seed}\nepisodes = 2000\n\n[collect]")
+        text = text.replace(
+            "[collect]",
+            f'[[base_data.datasets]]\nname = "{name}"\npolicy = "{policy}"\n'
+            f"seed = {seed}\nepisodes = 2000\n\n[collect]",
+        )
     with pytest.raises(ConfigError, match="has episodes = 12, but ckpt:base was trained on 4000"):
         run_cli("--debug", "study", "run", str(_write(tmp_path, text)))
     assert _outputs(nsl_home) == []
@@ -82,23 +104,43 @@ def test_a_study_name_is_bound_to_its_plan(tmp_path, mini_run, capsys):
 def test_shipped_plans_parse_and_build_a_graph(name):
     plan = load_plan(name)
     assert plan.name == name
-    base = [BaseSource(d.name, 1 / len(plan.base_data.datasets), None, d.episodes,
-                       {"shift": d.shift, "policy": d.policy, "policy_ref": d.policy, "episodes": d.episodes,
-                        "seed": d.seed, "epsilon": 0.0, "batch": 8}) for d in plan.base_data.datasets]
+    base = [
+        BaseSource(
+            d.name,
+            1 / len(plan.base_data.datasets),
+            None,
+            d.episodes,
+            {
+                "shift": d.shift,
+                "policy": d.policy,
+                "policy_ref": d.policy,
+                "episodes": d.episodes,
+                "seed": d.seed,
+                "epsilon": 0.0,
+                "batch": 8,
+            },
+        )
+        for d in plan.base_data.datasets
+    ]
     units = build_units(plan, name, base)
     graph = unit_graph(units)
     names = order(graph)
     assert names.index(f"base-data:{plan.base_data.datasets[0].name}") < names.index(
-        next(n for n in names if n.startswith("train:")))
+        next(n for n in names if n.startswith("train:"))
+    )
     if name != "tiny":
         # the shipped base's scripted data, at the weights its training gave them (see the plans' comment)
         assert plan.base_data.source == "plan"
         from nsl.learners import load_checkpoint
         from nsl.study.actions import resolve_checkpoint
-        recorded = {src["ref"].split("@")[0]: src["weight"]
-                    for src in load_checkpoint(resolve_checkpoint("ckpt:base").path).config["data"]["sources"]}
+
+        recorded = {
+            src["ref"].split("@")[0]: src["weight"]
+            for src in load_checkpoint(resolve_checkpoint("ckpt:base").path).config["data"]["sources"]
+        }
         assert {d.name: d.weight for d in plan.base_data.datasets} == pytest.approx(
-            {n: w for n, w in recorded.items() if n.startswith("grasp-base-")}, abs=1e-3)
+            {n: w for n, w in recorded.items() if n.startswith("grasp-base-")}, abs=1e-3
+        )
         assert plan.shifts == STUDY_SHIFTS
     if name in ("full", "paper"):
         assert plan.collect.episodes == 800 and plan.finetune.tiers == (25, 50, 100, 200, 400, 800)
@@ -108,10 +150,18 @@ def test_shipped_plans_parse_and_build_a_graph(name):
 def _plan_with_base_data(name: str, episodes: int, verify: bool = True):
     from nsl.study.plan import parse_plan
 
-    return parse_plan({"name": "verify", "base": "ckpt:base", "shifts": ["harsh_lighting"],
-                       "base_data": {"source": "plan", "verify": verify,
-                                     "datasets": [{"name": name, "policy": "oracle:0.5", "seed": 1,
-                                                   "episodes": episodes}]}})
+    return parse_plan(
+        {
+            "name": "verify",
+            "base": "ckpt:base",
+            "shifts": ["harsh_lighting"],
+            "base_data": {
+                "source": "plan",
+                "verify": verify,
+                "datasets": [{"name": name, "policy": "oracle:0.5", "seed": 1, "episodes": episodes}],
+            },
+        }
+    )
 
 
 def test_plan_base_data_the_base_records_must_reproduce_its_hash(tmp_path, monkeypatch):
@@ -136,8 +186,9 @@ def test_plan_base_data_the_base_records_must_reproduce_its_hash(tmp_path, monke
     (src,) = base_sources(_plan_with_base_data("tiny-base-oracle", 16))  # data the base never saw: nothing to check
     assert src.hash is None
     # the workspace holds other data under the recorded name: refused before any work, in one line
-    collect(CollectConfig(shift="base", episodes=2, policy="oracle:0.5", data="grasp-base-oracle", seed=1),
-            progress=False)
+    collect(
+        CollectConfig(shift="base", episodes=2, policy="oracle:0.5", data="grasp-base-oracle", seed=1), progress=False
+    )
     with pytest.raises(CorruptDataError, match="no version with the hash ckpt:base records") as err:
         base_sources(_plan_with_base_data("grasp-base-oracle", oracle["episodes"]))
     assert "\n" not in str(err.value)

@@ -7,8 +7,16 @@ import tomllib
 import pytest
 
 from nsl.study.plan import parse_plan
-from nsl.study.report import (Count, challenge_table, continual_table, diff_interval, early_stop_table, findings,
-                              render, tiers_table)
+from nsl.study.report import (
+    Count,
+    challenge_table,
+    continual_table,
+    diff_interval,
+    early_stop_table,
+    findings,
+    render,
+    tiers_table,
+)
 
 from .conftest import MINI_PLAN
 
@@ -21,26 +29,47 @@ def _curve(points):
     """Curve rows: (step, target successes, base successes, softopc, auc) out of 100 episodes each."""
     rows = []
     for step, t, b, softopc, auc in points:
-        rows.append({"step": step, "target_success": t / 100, "target_episodes": 100, "base_success": b / 100,
-                     "base_episodes": 100, "softopc": softopc, "auc": auc, "td_error": None})
+        rows.append(
+            {
+                "step": step,
+                "target_success": t / 100,
+                "target_episodes": 100,
+                "base_success": b / 100,
+                "base_episodes": 100,
+                "softopc": softopc,
+                "auc": auc,
+                "td_error": None,
+            }
+        )
     return rows
 
 
 def records(**changes) -> dict:
     plan = parse_plan(tomllib.loads(MINI_PLAN), default_name="mini").to_dict()
     rec = {
-        "study": "mini", "plan": plan,
+        "study": "mini",
+        "plan": plan,
         "base_policy": {"base": c(80), "harsh_lighting": c(20), "offset_gripper": c(75)},
         "finetune": {
-            "harsh_lighting": {"tiers": {"4": [c(40)], "8": [c(70)]}, "tiers_base": {"4": [c(80)], "8": [c(78)]},
-                               "baselines": {"scratch": [c(10)]}, "baselines_base": {"scratch": [c(5)]}},
-            "offset_gripper": {"tiers": {"4": [c(75)], "8": [c(85)]}, "tiers_base": {"4": [c(79)], "8": [c(81)]},
-                               "baselines": {"scratch": [c(60)]}, "baselines_base": {"scratch": [c(30)]}},
+            "harsh_lighting": {
+                "tiers": {"4": [c(40)], "8": [c(70)]},
+                "tiers_base": {"4": [c(80)], "8": [c(78)]},
+                "baselines": {"scratch": [c(10)]},
+                "baselines_base": {"scratch": [c(5)]},
+            },
+            "offset_gripper": {
+                "tiers": {"4": [c(75)], "8": [c(85)]},
+                "tiers_base": {"4": [c(79)], "8": [c(81)]},
+                "baselines": {"scratch": [c(60)]},
+                "baselines_base": {"scratch": [c(30)]},
+            },
         },
-        "continual": {"tasks": ["base", "harsh_lighting", "offset_gripper"],
-                      "stages": ["base policy", "harsh_lighting", "offset_gripper"],
-                      "cells": [[c(80), c(20), c(75)], [c(78), c(70), c(70)], [c(72), c(66), c(84)]],
-                      "single": {"harsh_lighting": c(70), "offset_gripper": c(80)}},
+        "continual": {
+            "tasks": ["base", "harsh_lighting", "offset_gripper"],
+            "stages": ["base policy", "harsh_lighting", "offset_gripper"],
+            "cells": [[c(80), c(20), c(75)], [c(78), c(70), c(70)], [c(72), c(66), c(84)]],
+            "single": {"harsh_lighting": c(70), "offset_gripper": c(80)},
+        },
         "curves": {"ft": {"0": _curve([(0, 20, 80, None, None), (5, 50, 78, None, None), (10, 60, 77, None, None)])}},
         "early_stop": _curve([(0, 75, 80, 0.01, 0.55), (5, 90, 79, 0.05, 0.70), (10, 70, 70, 0.08, 0.60)]),
     }
@@ -49,7 +78,9 @@ def records(**changes) -> dict:
 
 
 def test_newcombe_interval_contains_the_difference_and_matches_a_known_value():
-    d, lo, hi = diff_interval(Count(56, 70), Count(48, 80))  # Newcombe 1998, Table II example (h): 0.2, [0.0524, 0.3339]
+    d, lo, hi = diff_interval(
+        Count(56, 70), Count(48, 80)
+    )  # Newcombe 1998, Table II example (h): 0.2, [0.0524, 0.3339]
     assert d == pytest.approx(0.2)
     assert lo == pytest.approx(0.0524, abs=5e-4) and hi == pytest.approx(0.3339, abs=5e-4)
 
@@ -96,8 +127,14 @@ def test_findings_that_cannot_be_measured_say_so():
 def test_render_states_the_epsilon_and_every_section():
     text = render(records(), {"units": {"a": {"state": "done", "seconds": 60}}}, {})
     assert "**epsilon 0.1**" in text
-    for heading in ("## Findings", "## Challenge table (Table 5.1)", "## Fine-tuning by data size (Table 5.2)",
-                    "## The continual sequence (Table 5.3)", "## Method curves", "## Overfitting and early stopping"):
+    for heading in (
+        "## Findings",
+        "## Challenge table (Table 5.1)",
+        "## Fine-tuning by data size (Table 5.2)",
+        "## The continual sequence (Table 5.3)",
+        "## Method curves",
+        "## Overfitting and early stopping",
+    ):
         assert heading in text
 
 
@@ -120,8 +157,10 @@ def test_a_study_in_progress_reports_what_it_has():
 
 def test_a_calibrated_severity_keeps_the_study_figures_beside_ours():
     plan = tomllib.loads(MINI_PLAN.replace('"offset_gripper"]', '"offset_gripper@0.35"]', 1))
-    rec = records(plan=parse_plan(plan, default_name="mini").to_dict(),
-                  base_policy={"base": c(80), "harsh_lighting": c(20), "offset_gripper@0.35": c(40)})
+    rec = records(
+        plan=parse_plan(plan, default_name="mini").to_dict(),
+        base_policy={"base": c(80), "harsh_lighting": c(20), "offset_gripper@0.35": c(40)},
+    )
     rec["finetune"] = {"offset_gripper@0.35" if k == "offset_gripper" else k: v for k, v in rec["finetune"].items()}
     row = challenge_table(rec).splitlines()[-1]
     assert row.startswith("| offset gripper@0.35 | 40% [") and row.endswith("| 47% | -39 |")

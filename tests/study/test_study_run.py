@@ -15,6 +15,7 @@ from nsl.catalog import Catalog
 from nsl.datasets import api
 from nsl.study.report import findings
 from tests.conftest import run_cli
+from tests.study.conftest import STUDY_THREADS
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -51,19 +52,23 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
         assert row[3].endswith("%")  # the study's real-robot figure beside ours
     # Table 5.2: an 'ours' and a 'study' row per shift; columns base policy, tiers 4 and 8, scratch
     tiers = _table(text, "## Fine-tuning by data size")
-    assert [(r[0], r[1]) for r in tiers] == [("harsh lighting", "ours"), ("", "study"), ("offset gripper", "ours"),
-                                            ("", "study")]
+    assert [(r[0], r[1]) for r in tiers] == [
+        ("harsh lighting", "ours"),
+        ("", "study"),
+        ("offset gripper", "ours"),
+        ("", "study"),
+    ]
     assert all(len(r) == 6 for r in tiers)
     # the tier cells are the fine-tuned checkpoints' catalogued evaluations
     with Catalog() as cat:
         ft = cat.resolve_checkpoint("ckpt:mini-ft-harsh-lighting-n8-k10-s0@latest")
         e = next(x for x in cat.evaluations(ft.id, "harsh_lighting") if x.episodes == 4)
         assert ft.step == 10 and ft.parent == base_id
-        assert [(d.dataset, d.tier) for d in ft.data] == [("mini-base-oracle", 12),
-                                                          ("mini-harsh-lighting-by-base", 8)]
+        assert [(d.dataset, d.tier) for d in ft.data] == [("mini-base-oracle", 12), ("mini-harsh-lighting-by-base", 8)]
     assert tiers[0][4].startswith(f"{round(100 * e.successes / 4)}%")
     # the fine-tunes ran the product's recipe, and the report says so from what the checkpoint recorded
     from nsl.learners import FINE_TUNE_CONSERVATIVE, load_checkpoint
+
     training = load_checkpoint(ft.path).config["training"]
     assert training["conservative"] == FINE_TUNE_CONSERVATIVE == records["recipe"]["conservative"]
     assert f"conservative term {FINE_TUNE_CONSERVATIVE:g})" in text
@@ -72,8 +77,11 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
     spec = v.provenance["collections"][-1]["spec"]
     assert v.num_episodes == 8 and spec["policy_ref"] == "ckpt:base" and spec["policy"]["epsilon"] == 0.1
     # Table 5.3: one row per stage plus the base task; the matrix has base policy + 2 stages
-    assert [r[0] for r in _table(text, "## The continual sequence")] == ["harsh lighting", "offset gripper",
-                                                                         "base task"]
+    assert [r[0] for r in _table(text, "## The continual sequence")] == [
+        "harsh lighting",
+        "offset gripper",
+        "base task",
+    ]
     assert len(records["continual"]["cells"]) == 3
     assert all(c is not None for row in records["continual"]["cells"] for c in row)
     # stage 2 collected with stage 1's policy and fine-tuned from it
@@ -81,8 +89,12 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
         s1 = cat.resolve_checkpoint("ckpt:mini-ft-harsh-lighting-n8-k10-s0@latest")
         s2 = cat.resolve_checkpoint("ckpt:mini-c2-offset-gripper-n8-k10-s0@latest")
     assert s2.parent == s1.id
-    assert api.open_version("mini-offset-gripper-by-ft-harsh-lighting-n8-k10-s0").provenance[
-        "collections"][-1]["spec"]["policy_ref"] == "ckpt:mini-ft-harsh-lighting-n8-k10-s0@latest"
+    assert (
+        api.open_version("mini-offset-gripper-by-ft-harsh-lighting-n8-k10-s0").provenance["collections"][-1]["spec"][
+            "policy_ref"
+        ]
+        == "ckpt:mini-ft-harsh-lighting-n8-k10-s0@latest"
+    )
     # curves: steps 0, 5, 10 for target and base; early stopping: every planned criterion has a row
     assert [r["step"] for r in records["curves"]["ft"]["0"]] == [0, 5, 10]
     es = _table(text, "## Overfitting and early stopping")
@@ -119,14 +131,21 @@ def _numbers(home: Path) -> dict:
 
 def test_kill_9_then_rerun_gives_the_uninterrupted_numbers(mini_run, mini_plan, tmp_path):
     home = tmp_path / "killed"
-    env = {**os.environ, "NSL_HOME": str(home), "PYTHONPATH": str(ROOT), "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    env = {
+        **os.environ,
+        "NSL_HOME": str(home),
+        "PYTHONPATH": str(ROOT),
+        "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"),
+        "OMP_NUM_THREADS": str(STUDY_THREADS),  # the uninterrupted run's thread count
+    }
     cmd = [sys.executable, "-m", "nsl", "study", "run", str(mini_plan), "--quiet"]
     n_units = len(json.loads((mini_run / "studies" / "mini" / "units.json").read_text())["units"])
     seed = int(os.environ.get("NSL_KILL_SEED", "0"))  # NSL_KILL_SEED=k tries another point, reproducibly
     kill_after = random.Random(seed).randint(2, n_units - 2)  # this many units done before the kill
     print(f"killing after {kill_after} units (NSL_KILL_SEED={seed})")
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, process_group=0, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        cmd, cwd=ROOT, env=env, process_group=0, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
     status_file = home / "studies" / "mini" / "status.json"
     killed = False
     for _ in range(6000):  # bounded: at most about 10 minutes on a busy machine
@@ -147,4 +166,15 @@ def test_kill_9_then_rerun_gives_the_uninterrupted_numbers(mini_run, mini_plan, 
     assert not (home / "studies" / "mini" / "report.md").exists()
     out = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=900)
     assert out.returncode == 0, out.stderr[-2000:]
-    assert _numbers(home) == _numbers(mini_run)
+    killed_numbers, whole = _numbers(home), _numbers(mini_run)
+    assert _differences(killed_numbers, whole) == [], f"killed after {kill_after} units"
+    assert killed_numbers == whole
+
+
+def _differences(a, b, path: str = "") -> list[str]:
+    """Where two records differ, as 'path: a != b' lines (so a failure says which number moved)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return [d for k in sorted(set(a) | set(b), key=str) for d in _differences(a.get(k), b.get(k), f"{path}.{k}")]
+    if isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
+        return [d for i, (x, y) in enumerate(zip(a, b)) for d in _differences(x, y, f"{path}[{i}]")]
+    return [] if a == b else [f"{path}: {a!r} != {b!r}"]

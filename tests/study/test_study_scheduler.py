@@ -39,9 +39,13 @@ def done(unit: Unit) -> bool:
 
 def _graph(tmp_path, fail: str | None = None, meet: bool = False):
     p = {"dir": str(tmp_path), "meet": meet}
-    units = [Unit("collect:a", "collect", p), Unit("collect:b", "collect", p),
-             Unit("train:x", "train", {**p, "fail": fail == "train:x"}, ("collect:a", "collect:b")),
-             Unit("eval:x", "eval", p, ("train:x",)), Unit("eval:b", "eval", p, ("collect:b",))]
+    units = [
+        Unit("collect:a", "collect", p),
+        Unit("collect:b", "collect", p),
+        Unit("train:x", "train", {**p, "fail": fail == "train:x"}, ("collect:a", "collect:b")),
+        Unit("eval:x", "eval", p, ("train:x",)),
+        Unit("eval:b", "eval", p, ("collect:b",)),
+    ]
     return unit_graph(units)
 
 
@@ -51,7 +55,8 @@ def test_runs_in_dependency_order_and_skips_finished_units(tmp_path):
     status = run_graph(_graph(tmp_path), status_path, execute=touch_unit, is_done=done, workers=1, progress=False)
     assert status["state"] == "finished"
     assert {n: u["state"] for n, u in status["units"].items()} == dict.fromkeys(
-        ["collect:a", "collect:b", "train:x", "eval:x", "eval:b"], "done")
+        ["collect:a", "collect:b", "train:x", "eval:x", "eval:b"], "done"
+    )
     assert (tmp_path / "collect_a").read_text() == "made earlier"
     assert not (tmp_path / "collect_a.start").exists()
     assert json.loads(status_path.read_text())["units"]["train:x"]["seconds"] is not None
@@ -59,16 +64,28 @@ def test_runs_in_dependency_order_and_skips_finished_units(tmp_path):
 
 def test_a_failing_unit_stops_the_study_and_is_reported(tmp_path):
     with pytest.raises(UnitFailed, match="train:x was told to fail"):
-        run_graph(_graph(tmp_path, fail="train:x"), tmp_path / "status.json", execute=touch_unit, is_done=done,
-                  workers=1, progress=False)
+        run_graph(
+            _graph(tmp_path, fail="train:x"),
+            tmp_path / "status.json",
+            execute=touch_unit,
+            is_done=done,
+            workers=1,
+            progress=False,
+        )
     units = json.loads((tmp_path / "status.json").read_text())["units"]
     assert units["train:x"]["state"] == "failed" and "told to fail" in units["train:x"]["error"]
     assert units["eval:x"]["state"] == "left"
 
 
 def test_two_workers_run_independent_units_at_once_in_their_own_processes(tmp_path):
-    status = run_graph(_graph(tmp_path, meet=True), tmp_path / "status.json", execute=touch_unit, is_done=done,
-                       workers=2, progress=False)
+    status = run_graph(
+        _graph(tmp_path, meet=True),
+        tmp_path / "status.json",
+        execute=touch_unit,
+        is_done=done,
+        workers=2,
+        progress=False,
+    )
     assert all(u["state"] == "done" for u in status["units"].values())
     starts = {n: (tmp_path / f"{n}.start").read_text().split() for n in ("collect_a", "collect_b")}
     pids = {p for _, p in starts.values()}

@@ -73,8 +73,9 @@ def test_transfer_measures_every_pair_with_catalogued_runs(xmini, mini_run):
     runs = mini_run / "runs"
     floor = 1 / 3
     for src, dst in PAIRS:
-        ft = _auc(runs / f"xmini-ft-{src.replace('_', '-')}-to-{dst.replace('_', '-')}-n{6 if dst == 'base' else 8}"
-                         "-k4-s0")
+        ft = _auc(
+            runs / f"xmini-ft-{src.replace('_', '-')}-to-{dst.replace('_', '-')}-n{6 if dst == 'base' else 8}-k4-s0"
+        )
         scratch = _auc(runs / f"xmini-scratch-{dst.replace('_', '-')}-n{6 if dst == 'base' else 8}-k4-s0")
         assert m["meta"]["scratch_auc"][dst]["0"] == pytest.approx(scratch)
         assert m["advantage"][src][dst] == pytest.approx(ft / max(scratch, floor))
@@ -84,8 +85,10 @@ def test_transfer_measures_every_pair_with_catalogued_runs(xmini, mini_run):
         ft = cat.resolve_checkpoint("ckpt:xmini-ft-harsh-lighting-to-base-n6-k4-s0@latest")
         harsh = cat.resolve_checkpoint("ckpt:mini-ft-harsh-lighting-n8-k10-s0@latest")
         assert ft.step == 4 and ft.parent == harsh.id and ft.shift == "base"
-        assert {(u.dataset, u.tier, u.weight) for u in ft.data} == {("mini-base-oracle", 12, 0.5),
-                                                                     ("xmini-base-by-base", 6, 0.5)}  # 50/50
+        assert {(u.dataset, u.tier, u.weight) for u in ft.data} == {
+            ("mini-base-oracle", 12, 0.5),
+            ("xmini-base-by-base", 6, 0.5),
+        }  # 50/50
         assert ft.config["training"]["lr"] == pytest.approx(0.25 * 3e-4)  # the study's fine-tuning lr, not 25% of 25%
         scratch = cat.resolve_checkpoint("ckpt:xmini-scratch-base-n6-k4-s0@latest")
         assert scratch.config["training"]["lr"] == pytest.approx(3e-4) and scratch.config["method"] == "scratch"
@@ -123,20 +126,37 @@ def test_curriculum_reads_the_transfer_by_name(xmini, capsys):
     a = json.loads((xmini / "matrix.json").read_text())["advantage"]
     # the three curricula of two tasks: both from scratch, harsh lighting from base, base from harsh lighting
     totals = [2.0, 1.0 + a["base"]["harsh_lighting"], 1.0 + a["harsh_lighting"]["base"]]
-    assert out["optimal"]["cost"] == pytest.approx(-max(totals)) and out["pessimal"]["cost"] == pytest.approx(-min(totals))
+    assert out["optimal"]["cost"] == pytest.approx(-max(totals)) and out["pessimal"]["cost"] == pytest.approx(
+        -min(totals)
+    )
     assert out["from_scratch"] == -2.0 and out["from_base"] == pytest.approx(-totals[1])
     assert out["picture"].endswith("transfers/xmini/curriculum.png")
 
 
 def test_suggest_base_ranks_measured_transfer_first_then_the_proxy(xmini, mini_run, capsys):
+    from nsl import keys
     from nsl.datasets import api
     from nsl.eval import q_ranking_auc
     from nsl.learners import load_policy
-    from nsl import keys
 
-    cands = ["ckpt:base", "ckpt:mini-ft-harsh-lighting-n8-k10-s0@latest", "ckpt:mini-ft-offset-gripper-n8-k10-s0@latest"]
-    argv = ["catalog", "suggest-base", "--shift", "base", "--data", "mini-base-oracle", "--episodes", "12",
-            "--transfer", "xmini", "--json"]
+    cands = [
+        "ckpt:base",
+        "ckpt:mini-ft-harsh-lighting-n8-k10-s0@latest",
+        "ckpt:mini-ft-offset-gripper-n8-k10-s0@latest",
+    ]
+    argv = [
+        "catalog",
+        "suggest-base",
+        "--shift",
+        "base",
+        "--data",
+        "mini-base-oracle",
+        "--episodes",
+        "12",
+        "--transfer",
+        "xmini",
+        "--json",
+    ]
     for c in cands:
         argv += ["--checkpoint", c]
     assert run_cli(*argv) == 0
@@ -155,8 +175,9 @@ def test_suggest_base_ranks_measured_transfer_first_then_the_proxy(xmini, mini_r
     with Catalog() as cat:
         for c in cands[::2]:
             e = cat.resolve_checkpoint(c)
-            q = load_policy(e.path).q_values({"image": arrays[keys.OBS_IMAGE], "state": arrays[keys.OBS_STATE]},
-                                             arrays[keys.ACTION])
+            q = load_policy(e.path).q_values(
+                {"image": arrays[keys.OBS_IMAGE], "state": arrays[keys.OBS_STATE]}, arrays[keys.ACTION]
+            )
             expected[f"ckpt:{e.ref}"] = q_ranking_auc(q, labels)
     rest = ranked[1:]
     assert [r["basis"] for r in rest] == ["proxy", "proxy"]
@@ -167,38 +188,58 @@ def test_suggest_base_ranks_measured_transfer_first_then_the_proxy(xmini, mini_r
 
 def test_curriculum_on_a_hand_made_matrix_file(tmp_path, capsys):
     path = tmp_path / "m.json"
-    path.write_text(json.dumps({"tasks": ["base", "harsh", "offset"], "base": "base",
-                                "advantage": {"base": {"harsh": 2.0, "offset": 1.5}, "harsh": {"base": 0.5,
-                                                                                               "offset": 3.0},
-                                              "offset": {"base": 0.8, "harsh": 0.9}}}))
+    path.write_text(
+        json.dumps(
+            {
+                "tasks": ["base", "harsh", "offset"],
+                "base": "base",
+                "advantage": {
+                    "base": {"harsh": 2.0, "offset": 1.5},
+                    "harsh": {"base": 0.5, "offset": 3.0},
+                    "offset": {"base": 0.8, "harsh": 0.9},
+                },
+            }
+        )
+    )
     assert run_cli("curriculum", "--matrix", str(path)) == 0
     out = capsys.readouterr().out
     assert "optimal curriculum (predicted cost -6.00):" in out
-    assert [ln.split()[0:3] for ln in out.splitlines()[1:4]] == [["base", "from", "scratch"],
-                                                                 ["harsh", "from", "base"], ["offset", "from", "harsh"]]
+    assert [ln.split()[0:3] for ln in out.splitlines()[1:4]] == [
+        ["base", "from", "scratch"],
+        ["harsh", "from", "base"],
+        ["offset", "from", "harsh"],
+    ]
     assert "all from the base (base)         -4.50" in out and "all from scratch                 -3.00" in out
     assert (tmp_path / "curriculum.png").stat().st_size > 1000
-    assert run_cli("curriculum", "harsh", "offset", "--matrix", str(path), "--json", "--out",
-                   str(tmp_path / "t.png")) == 0
+    assert (
+        run_cli("curriculum", "harsh", "offset", "--matrix", str(path), "--json", "--out", str(tmp_path / "t.png")) == 0
+    )
     out = json.loads(capsys.readouterr().out)
-    assert out["from_base"] is None and out["optimal"]["edges"][1] == {"from": "harsh", "to": "offset",
-                                                                      "advantage": 3.0, "cost": -3.0}
+    assert out["from_base"] is None and out["optimal"]["edges"][1] == {
+        "from": "harsh",
+        "to": "offset",
+        "advantage": 3.0,
+        "cost": -3.0,
+    }
     assert run_cli("curriculum", "harsh", "transparent", "--matrix", str(path)) == 2
     err = capsys.readouterr().err
     assert err == "nsl: error: task 'transparent' is not in the transfer matrix; its tasks: base, harsh, offset\n"
 
 
-@pytest.mark.parametrize("change, message", [
-    (('shift = "harsh_lighting"', 'shift = "harsh_lightning"'), "unknown shift 'harsh_lightning'"),
-    (("every = 2", "every = 3"), "every = 3 must divide steps = 4"),
-    (('shift = "harsh_lighting"', 'shift = "base"'), "tasks repeat the shift 'base'"),
-    (('study = "mini"\n', ""), "transfer plan [top level] lacks ['study']"),
-    (('checkpoint = "ckpt:base"', 'checkpoint = "base"'), "checkpoint = 'base' must be a checkpoint reference"),
-    (("seeds = [0]", "seeds = [0, 0]"), "seeds = [0, 0] must be a non-empty list of distinct seeds"),
-    (("episodes = 8\n", "episodes = 8\ntier = 4\n"), "[tasks[1]] has unknown setting(s) ['tier']"),
-    (('data = "mini-harsh-lighting-by-base"', 'data = "mini-harsh-lighting-by-base:4"'), "must be a dataset name"),
-    (('study = "mini"', 'study = "nostudy"'), "study = 'nostudy': no study named 'nostudy'"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (('shift = "harsh_lighting"', 'shift = "harsh_lightning"'), "unknown shift 'harsh_lightning'"),
+        (("every = 2", "every = 3"), "every = 3 must divide steps = 4"),
+        (('shift = "harsh_lighting"', 'shift = "base"'), "tasks repeat the shift 'base'"),
+        (('study = "mini"\n', ""), "transfer plan [top level] lacks ['study']"),
+        (('checkpoint = "ckpt:base"', 'checkpoint = "base"'), "checkpoint = 'base' must be a checkpoint reference"),
+        (("seeds = [0]", "seeds = [0, 0]"), "seeds = [0, 0] must be a non-empty list of distinct seeds"),
+        (("episodes = 8\n", "episodes = 8\ntier = 4\n"), "[tasks[1]] has unknown setting(s) ['tier']"),
+        (('data = "mini-harsh-lighting-by-base"', 'data = "mini-harsh-lighting-by-base:4"'), "must be a dataset name"),
+        (('study = "mini"', 'study = "nostudy"'), "study = 'nostudy': no study named 'nostudy'"),
+    ],
+)
 def test_bad_transfer_plans_are_refused_in_one_line(tmp_path, nsl_home, capsys, change, message):
     old, new = change
     assert old in MINI_TRANSFER
@@ -210,11 +251,16 @@ def test_bad_transfer_plans_are_refused_in_one_line(tmp_path, nsl_home, capsys, 
     assert not (nsl_home / "transfers").exists() and not (nsl_home / "runs").exists()
 
 
-@pytest.mark.parametrize("change, message", [
-    (("mini-ft-harsh-lighting-n8-k10-s0", "mini-ft-harsh-lighting-n8-k99-s0"),
-     "transfer task harsh_lighting: checkpoint ckpt:mini-ft-harsh-lighting-n8-k99-s0@latest is not catalogued"),
-    (("episodes = 8\n", "episodes = 9\n"), "dataset mini-harsh-lighting-by-base@v1 has 8 episodes, fewer than"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (
+            ("mini-ft-harsh-lighting-n8-k10-s0", "mini-ft-harsh-lighting-n8-k99-s0"),
+            "transfer task harsh_lighting: checkpoint ckpt:mini-ft-harsh-lighting-n8-k99-s0@latest is not catalogued",
+        ),
+        (("episodes = 8\n", "episodes = 9\n"), "dataset mini-harsh-lighting-by-base@v1 has 8 episodes, fewer than"),
+    ],
+)
 def test_transfer_plans_are_checked_against_the_workspace(mini_run, tmp_path, capsys, change, message):
     path = tmp_path / "bad.toml"
     path.write_text(MINI_TRANSFER.replace(*change).replace('name = "xmini"', 'name = "xbad"'))
