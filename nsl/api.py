@@ -28,8 +28,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from nsl import _API
 from nsl.errors import ConfigError
-from nsl.scenes import EVAL_SCENES, FINAL_REPORTING_SCENES, REPORTING_SCENES, SELECTION_SCENES
+from nsl.scenes import EVAL_SCENES, FINAL_REPORTING_SCENES, REPORTING_SCENES, SELECTION_SCENES  # noqa: F401  (re-exported)
 from nsl.services.options import CollectConfig, ContinualConfig, EfficiencyConfig, EvaluateOptions, TrainOptions
 
 if TYPE_CHECKING:
@@ -40,33 +41,7 @@ if TYPE_CHECKING:
 
 C = TypeVar("C")
 
-__all__ = [
-    "CollectConfig",
-    "ContinualConfig",
-    "Curriculum",
-    "EfficiencyConfig",
-    "EvaluateOptions",
-    "StudyRun",
-    "TrainOptions",
-    "EVAL_SCENES",
-    "FINAL_REPORTING_SCENES",
-    "REPORTING_SCENES",
-    "SELECTION_SCENES",
-    "build_curriculum",
-    "collect",
-    "continual",
-    "efficiency",
-    "evaluate",
-    "pull",
-    "push",
-    "report",
-    "study_report",
-    "study_run",
-    "study_status",
-    "train",
-    "transfer_report",
-    "transfer_run",
-]
+__all__ = list(_API)  # the names `import nsl` offers (nsl/__init__.py lists them without importing this module)
 
 
 def _settle(cls: type[C], config: C | None, fields: Mapping[str, Any], call: str) -> C:

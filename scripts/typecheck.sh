@@ -18,7 +18,7 @@ TREE="$(mktemp -d)"
 trap 'rm -rf "$TREE"' EXIT
 
 mkdir "$TREE/nsl"
-for f in "$ROOT"/nsl/*.py "$ROOT/nsl/commands" "$ROOT/nsl/bench" "$ROOT/nsl/assets"; do
+for f in "$ROOT"/nsl/*; do  # the core, the API and the command line's folders
     ln -s "$f" "$TREE/nsl/"
 done
 for d in collectors datasets learners eval catalog services share cluster study curriculum; do

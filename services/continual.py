@@ -16,7 +16,7 @@ from typing import Any
 from . import collect as collect_service
 from . import evaluate as evaluate_service
 from . import train as train_service
-from .options import CollectConfig, ContinualConfig, EvaluateOptions, TrainOptions
+from .options import CollectConfig, ContinualConfig, EvaluateOptions
 
 __all__ = ["ContinualConfig", "ContinualResult", "continual"]
 
@@ -88,16 +88,8 @@ def continual(config: ContinualConfig, name: str = "continual", *, progress: boo
 
 def _fine_tune(data: str, init: str, name: str, shift: str, cfg: ContinualConfig, progress: bool) -> str:
     """Fine-tune ``init`` on ``data`` mixed 50/50 with the base data; returns the checkpoint id."""
-    return train_service.train(
-        TrainOptions(
-            data=(f"{cfg.base_data}=0.5", f"{data}=0.5"),
-            init=init,
-            steps=cfg.steps,
-            name=name,
-            seed=cfg.seed,
-            target_shift=shift,
-        ),
-        progress=progress,
+    return train_service.fine_tune_half_half(
+        cfg.base_data, data, init, name, steps=cfg.steps, seed=cfg.seed, shift=shift, progress=progress
     ).id
 
 

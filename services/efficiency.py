@@ -17,7 +17,7 @@ from dataclasses import asdict
 from . import evaluate as evaluate_service
 from . import train as train_service
 from .continual import slug
-from .options import EfficiencyConfig, EvaluateOptions, TrainOptions
+from .options import EfficiencyConfig, EvaluateOptions
 
 __all__ = ["EfficiencyConfig", "efficiency"]
 
@@ -106,16 +106,8 @@ def efficiency(config: EfficiencyConfig, name: str = "efficiency", *, progress: 
 def _fine_tune(run: str, ref: str, shift: str, k: int, init: str | None, cfg: EfficiencyConfig, progress: bool) -> str:
     """Train on the first ``k`` episodes of ``ref`` mixed 50/50 with the base data; returns ``ckpt:ID``."""
     name = f"{run}-{slug(shift)}-{k}" if init else f"{run}-{slug(shift)}-scratch-{k}"
-    result = train_service.train(
-        TrainOptions(
-            data=(f"{cfg.base_data}=0.5", f"{ref}:{k}=0.5"),
-            init=init,
-            steps=cfg.steps,
-            name=name,
-            seed=cfg.seed,
-            target_shift=shift,
-        ),
-        progress=progress,
+    result = train_service.fine_tune_half_half(
+        cfg.base_data, f"{ref}:{k}", init, name, steps=cfg.steps, seed=cfg.seed, shift=shift, progress=progress
     )
     return f"ckpt:{result.id}"
 

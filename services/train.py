@@ -344,3 +344,13 @@ def register_evaluated(
                     seed=seed,
                     extra={"source": source, "step": row.step},
                 )
+
+
+def fine_tune_half_half(
+    base_data: str, target: str, init: str | None, name: str, *, steps: int, seed: int, shift: str, progress: bool
+) -> TrainResult:
+    """The study's recipe: ``init`` (None: from scratch) trained on ``target`` mixed 50/50 with ``base_data``."""
+    options = TrainOptions(
+        data=(f"{base_data}=0.5", f"{target}=0.5"), init=init, steps=steps, name=name, seed=seed, target_shift=shift
+    )
+    return train(options, progress=progress)

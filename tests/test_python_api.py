@@ -56,3 +56,11 @@ def test_settings_are_checked_in_one_line(tmp_path, monkeypatch):
     with pytest.raises(ConfigError, match="takes a TrainOptions, not CollectConfig"):
         nsl.train(nsl.CollectConfig(shift="base", episodes=1, policy="random", data="d"))
     assert opts.batch_size == 64 and opts.eval_scenes == nsl.SELECTION_SCENES
+
+
+def test_every_api_name_resolves():
+    import nsl
+    import nsl.api
+
+    assert [n for n in nsl._API if not hasattr(nsl.api, n)] == []
+    assert sorted(nsl.api.__all__) == sorted(nsl._API)
