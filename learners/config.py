@@ -170,6 +170,7 @@ class TrainConfig:
     augment_crop: int = 4  # random-shift augmentation: pad by this many pixels and crop back; 0 disables
     augment_colour: float = 0.1  # colour jitter strength (brightness, contrast, per-channel gain); 0 disables
     seed: int = 0
+    precision: str = "fp32"  # network passes: fp32, bf16 (CPU autocast; weights and optimiser stay fp32) or auto
     log_every: int = 100  # steps between metric rows (CSV and TensorBoard)
     checkpoint_every: int = 2000  # steps between checkpoints (a killed run resumes from the last one)
     eval_every: int = 0  # steps between eval_fn calls; 0 disables
@@ -215,6 +216,8 @@ class TrainConfig:
                     f"shrink_perturb {sp!r} must be (alpha, sigma) with 0 < alpha <= 1 and sigma >= 0, e.g. (0.8, 0.01)"
                 )
             object.__setattr__(self, "shrink_perturb", (float(sp[0]), float(sp[1])))
+        if self.precision not in ("fp32", "bf16", "auto"):
+            raise ConfigError(f"precision {self.precision!r} is unknown; use fp32, bf16 or auto")
         if self.keep_trainer_state < 1:
             raise ConfigError(f"keep_trainer_state {self.keep_trainer_state} must be at least 1 (resume needs one)")
 
@@ -230,6 +233,8 @@ class TrainConfig:
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["cem"] = self.cem.to_dict()
+        if d["precision"] == "fp32":
+            del d["precision"]  # absent means fp32: configs (and checkpoint ids) made before the option hold
         return d
 
     @classmethod

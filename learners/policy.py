@@ -37,6 +37,7 @@ from .cem import cem_maximize, full_actions, noise_from_rngs
 from .checkpoint import checkpoint_id, load_checkpoint
 from .config import CemConfig, TrainConfig
 from .networks import QNetwork
+from .precision import autocast, resolve_precision
 
 
 class CEMPolicy:
@@ -56,6 +57,7 @@ class CEMPolicy:
         name: str = "cem",
         info: dict[str, Any] | None = None,
         action_noise: float = 0.0,
+        precision: str = "fp32",
     ):
         if not 0.0 <= epsilon <= 1.0:
             raise ConfigError(f"epsilon {epsilon!r} is out of range; use 0..1 (e.g. 0.1 for exploration)")
@@ -70,13 +72,14 @@ class CEMPolicy:
         self.action_noise = float(action_noise)
         self.name = name
         self.info = dict(info or {})
+        self.precision = resolve_precision(precision)
 
     def q_values(self, obs: dict[str, np.ndarray], actions: np.ndarray) -> np.ndarray:
         """P(success) (B,) of environment actions (B, 6) in states ``obs``."""
         image, state = self._inputs(obs)
-        with torch.inference_mode():
+        with torch.inference_mode(), autocast(self.precision):
             act = torch.from_numpy(np.asarray(actions, np.float32)[:, list(self.net.cfg.action_dims)])
-            return torch.sigmoid(self.net(image, state, act)).numpy()
+            return torch.sigmoid(self.net(image, state, act).float()).numpy()
 
     def _inputs(self, obs: dict[str, np.ndarray]) -> tuple[torch.Tensor, torch.Tensor]:
         image = np.asarray(obs["image"])
@@ -100,12 +103,16 @@ class CEMPolicy:
         dims = len(self.net.cfg.action_dims)
         noise = noise_from_rngs(rngs, dims, self.cem)
         best, logits = np.zeros((len(image), dims), np.float32), np.zeros(len(image), np.float32)
-        with torch.inference_mode():
+        with torch.inference_mode(), autocast(self.precision):
             for i in range(len(image)):
                 ctx = self.net.encode(image[i : i + 1], state[i : i + 1])
-                b, s = cem_maximize(functools.partial(self.net.score, ctx), noise[i : i + 1], self.cem)
+                b, s = cem_maximize(functools.partial(self._score, ctx), noise[i : i + 1], self.cem)
                 best[i], logits[i] = b[0].numpy(), s[0].item()
         return best, logits
+
+    def _score(self, ctx: list[dict], candidates: torch.Tensor) -> torch.Tensor:
+        """Float32 logits of ``candidates`` (whatever precision the head computed them in)."""
+        return self.net.score(ctx, candidates).float()
 
     def __call__(
         self, obs: dict[str, np.ndarray], *, rngs: list[np.random.Generator], privileged: list[dict] | None = None
@@ -123,7 +130,9 @@ class CEMPolicy:
         return full_actions(active, self.net.cfg)
 
     def describe(self) -> dict[str, Any]:
-        noise = {"action_noise": self.action_noise} if self.action_noise > 0 else {}  # absent at 0: old hashes hold
+        noise: dict[str, Any] = {"action_noise": self.action_noise} if self.action_noise > 0 else {}
+        if self.precision != "fp32":  # absent at their defaults: the hashes of datasets made before them hold
+            noise["precision"] = self.precision
         return {
             "policy": "cem",
             "name": self.name,
@@ -135,9 +144,16 @@ class CEMPolicy:
 
 
 def load_policy(
-    checkpoint_dir: str | Path, epsilon: float = 0.0, action_noise: float = 0.0, **cem_overrides: Any
+    checkpoint_dir: str | Path,
+    epsilon: float = 0.0,
+    action_noise: float = 0.0,
+    precision: str = "fp32",
+    **cem_overrides: Any,
 ) -> CEMPolicy:
-    """A :class:`CEMPolicy` from a checkpoint folder; CEM settings default to the checkpoint's training ones."""
+    """A :class:`CEMPolicy` from a checkpoint folder; CEM settings default to the checkpoint's training ones.
+
+    ``precision`` is the precision it acts in (``fp32``, ``bf16`` or ``auto``), whatever it was trained in.
+    """
     ckpt = load_checkpoint(Path(checkpoint_dir))
     cem = TrainConfig.from_dict(ckpt.config["training"]).cem
     unknown = sorted(set(cem_overrides) - set(cem.to_dict()))
@@ -147,4 +163,12 @@ def load_policy(
     path = Path(checkpoint_dir)
     # The content id, not the path: a dataset's metadata (and so its version hash) holds this description.
     info = {"checkpoint_id": checkpoint_id(path), "step": ckpt.step}
-    return CEMPolicy(ckpt.net, cem, epsilon=epsilon, name=f"ckpt:{path.name}", info=info, action_noise=action_noise)
+    return CEMPolicy(
+        ckpt.net,
+        cem,
+        epsilon=epsilon,
+        name=f"ckpt:{path.name}",
+        info=info,
+        action_noise=action_noise,
+        precision=precision,
+    )

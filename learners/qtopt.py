@@ -25,6 +25,11 @@ random actions are scored as failures with weight alpha::
 
 (CQL's own logsumexp form raises the data actions' values while it lowers the
 others'; with a sigmoid Q that inflated every target towards 1 here.)
+
+With ``TrainConfig.precision`` ``bf16`` the network passes (the target's CEM
+search and the loss's forward pass) run under CPU bfloat16 autocast; the
+logits are taken back to float32 before the sigmoid, the minimum and the log
+loss, and the weights and Adam's state stay float32 (``learners/precision.py``).
 """
 
 from __future__ import annotations
@@ -40,6 +45,7 @@ from .augment import prepare_images
 from .cem import active_actions, cem_maximize, noise_from_generator
 from .config import CemConfig, TrainConfig
 from .networks import QNetwork, clone_frozen
+from .precision import autocast
 
 
 @dataclass
@@ -98,8 +104,8 @@ def bellman_target(
     if len(live):
         img, st = next_image[live], next_state[live]
         ctx = polyak.encode(img, st)
-        best, logit_polyak = cem_maximize(lambda cand: polyak.score(ctx, cand), noise[live], cem)
-        logit_lagged = lagged(img, st, best)
+        best, logit_polyak = cem_maximize(lambda cand: polyak.score(ctx, cand).float(), noise[live], cem)
+        logit_lagged = lagged(img, st, best).float()
         value[live] = torch.sigmoid(torch.minimum(logit_polyak, logit_lagged))
     return reward + gamma * (1.0 - done) * value, value
 
@@ -120,7 +126,7 @@ def update(learner: Learner, batch: dict[str, torch.Tensor], cfg: TrainConfig, s
     reward, done = batch[keys.REWARD], batch[keys.DONE]
     noise = noise_from_generator(len(reward), action.shape[1], cfg.cem, gen)
 
-    with torch.no_grad():
+    with torch.no_grad(), autocast(cfg.precision):
         target, next_value = bellman_target(
             learner.polyak,
             learner.lagged,
@@ -137,12 +143,15 @@ def update(learner: Learner, batch: dict[str, torch.Tensor], cfg: TrainConfig, s
     if alpha > 0:
         # The data's action first, then uniform random candidates; one trunk pass for all of them.
         rand = torch.rand(len(reward), cfg.conservative_samples, action.shape[1], generator=gen) * 2.0 - 1.0
-        all_logits = net.score(net.encode(image, batch[keys.OBS_STATE]), torch.cat([action.unsqueeze(1), rand], 1))
+        with autocast(cfg.precision):
+            candidates = torch.cat([action.unsqueeze(1), rand], 1)
+            all_logits = net.score(net.encode(image, batch[keys.OBS_STATE]), candidates).float()
         logits = all_logits[:, 0]
         rand_logits = all_logits[:, 1:]
         conservative = F.binary_cross_entropy_with_logits(rand_logits, torch.zeros_like(rand_logits))
     else:
-        logits = net(image, batch[keys.OBS_STATE], action)
+        with autocast(cfg.precision):
+            logits = net(image, batch[keys.OBS_STATE], action).float()
         conservative = logits.new_zeros(())
     td_loss = F.binary_cross_entropy_with_logits(logits, target)
     loss = td_loss + alpha * conservative

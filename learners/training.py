@@ -61,6 +61,7 @@ from .checkpoint import (
 from .config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_LR_FACTOR, METHODS, NetConfig, TrainConfig
 from .networks import QNetwork, grow_column, reinit_head, shrink_perturb
 from .policy import CEMPolicy
+from .precision import resolve_precision
 from .qtopt import Learner, batch_to_torch, update
 from .sampler import Sampler
 
@@ -171,7 +172,9 @@ def train(
         )
     parent = load_checkpoint(Path(init_checkpoint)) if init_checkpoint is not None else None
     lr = resolve_lr(config, method, parent)
-    resolved = config.replace(lr=lr, conservative=resolve_conservative(config, parent))
+    resolved = config.replace(
+        lr=lr, conservative=resolve_conservative(config, parent), precision=resolve_precision(config.precision)
+    )
     model = initial_network(method, parent, net or (None if parent else NetConfig()), config.seed)
     if config.shrink_perturb is not None:
         if parent is None or method == "scratch":
@@ -270,7 +273,9 @@ def _evaluate(
     eval_fn: EvalFn, learner: Learner, cfg: TrainConfig, step: int, out: Path, log: _Logger, evals: list
 ) -> bool:
     snapshot = copy.deepcopy(learner.online).eval()
-    policy = CEMPolicy(snapshot, cfg.cem, name=f"{out.name}@{step}", info={"run": str(out), "step": step})
+    policy = CEMPolicy(
+        snapshot, cfg.cem, name=f"{out.name}@{step}", info={"run": str(out), "step": step}, precision=cfg.precision
+    )
     result = dict(eval_fn(step, policy) or {})
     evals.append({"step": step, **result})
     log.eval(step, result)

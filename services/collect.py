@@ -50,7 +50,9 @@ def collect(
     from .refs import policy_factory
 
     env_config = EnvConfig(shift=cfg.shift, split=cfg.split, image_size=cfg.image_size)
-    make_policy = policy_factory(cfg.policy, env_config, epsilon=cfg.epsilon, action_noise=cfg.action_noise)
+    make_policy = policy_factory(
+        cfg.policy, env_config, epsilon=cfg.epsilon, action_noise=cfg.action_noise, precision=cfg.precision
+    )
     spec = {"env": env_config.to_dict(), "policy": make_policy().describe(), "policy_ref": cfg.policy, "seed": cfg.seed}
     coll = api.Collection.begin(cfg.data, cfg.episodes, spec, cfg.image_size, cfg.episodes_per_file, restart=restart)
     if coll.up_to_date:
@@ -141,7 +143,7 @@ def _collect(
 def _argv(cfg: CollectConfig) -> list[str]:
     out = []
     for k, v in asdict(cfg).items():
-        if k == "action_noise" and not v:
-            continue  # an option added later: commands without it are recorded as before
+        if (k == "action_noise" and not v) or (k == "precision" and v == "fp32"):
+            continue  # options added later: commands without them are recorded as before
         out += [f"--{k.replace('_', '-')}", str(v)]
     return out

@@ -23,6 +23,7 @@ class EvaluationResult:
     table: dict  # {ref: {shift: SuccessRate}}
     paired: dict  # {shift: PairedComparison}, with exactly two refs
     stored: dict  # {ref: catalog id} of the checkpoints whose evaluations were stored
+    precision: str = "fp32"  # what checkpoint policies acted in (fp32 or bf16)
 
     def __getitem__(self, key: str) -> Any:  # result["table"], as the dict it replaces
         return getattr(self, key)
@@ -69,7 +70,10 @@ def evaluate(
         raise ConfigError("no policy to evaluate; give --checkpoint REF or --policy REF")
     shifts = parse_shift_list(shift, severity)
     config = EvalConfig(episodes=episodes, split=split, seed=seed, workers=workers, batch=batch_size)
-    factories = {ref: policy_factory(ref, EnvConfig()) for ref in refs}  # validate all before any work
+    from nsl.learners.precision import resolve_precision
+
+    precision = resolve_precision(o.precision)
+    factories = {ref: policy_factory(ref, EnvConfig(), precision=precision) for ref in refs}  # validate all first
     from nsl.cluster import open_executor
 
     with open_executor(cluster) as ex:  # local processes, or scene chunks as Ray tasks (same outcomes)
@@ -78,15 +82,15 @@ def evaluate(
             for ref, make in factories.items()
         }
     table = {ref: {s: success_rate_from_outcomes(s, out) for s, out in res.items()} for ref, res in outcomes.items()}
-    stored = _store(table, config, source)
+    stored = _store(table, config, source, precision)
     paired = {}
     if len(refs) == 2:
         a, b = refs
         paired = {s: compare_paired(outcomes[a][s], outcomes[b][s], a, b) for s in outcomes[a]}
-    return EvaluationResult(config, outcomes, table, paired, stored)
+    return EvaluationResult(config, outcomes, table, paired, stored, precision)
 
 
-def _store(table, config, source: str | None) -> dict[str, str]:
+def _store(table, config, source: str | None, precision: str) -> dict[str, str]:
     """Record checkpoint evaluations in the catalog; returns ``{ref: checkpoint id}``."""
     refs = [r for r in table if r.startswith("ckpt:") or r == "base"]
     if not refs:
@@ -96,7 +100,12 @@ def _store(table, config, source: str | None) -> dict[str, str]:
 
     from .refs import resolve_init
 
-    extra = {"eval": config.to_dict(), "code_version": code_version(), **({"source": source} if source else {})}
+    extra = {
+        "eval": config.to_dict(),
+        "code_version": code_version(),
+        **({"source": source} if source else {}),
+        **({"precision": precision} if precision != "fp32" else {}),
+    }
     stored = {}
     with Catalog() as cat:
         for ref in refs:

@@ -18,6 +18,7 @@ from nsl.errors import ConfigError
 from nsl.eval.config import EarlyStopConfig, EvalConfig
 from nsl.learners.config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_LR_FACTOR, FINE_TUNE_STEPS, TrainConfig
 
+PRECISIONS = ("fp32", "bf16", "auto")  # nsl.learners.precision.PRECISIONS (that module loads torch)
 METHOD_HELP = (
     "ft = fine-tune all parameters of --init (the study's method); scratch = random init; "
     "new_head = parent's trunk, re-initialised head; pnn = progressive network (frozen parent column "
@@ -64,6 +65,12 @@ class CollectConfig:
         "with a ckpt: policy, Gaussian noise of this std (action units; 1 unit moves "
         "the wrist 3 cm) added to every action: exploration near what the policy would do",
     )
+    precision: str = option(
+        "fp32",
+        "with a ckpt: policy, the precision its network acts in: fp32, bf16 (CPU bfloat16) or auto (bf16 where "
+        "the CPU has it); recorded in the dataset",
+        choices=PRECISIONS,
+    )
 
     def __post_init__(self) -> None:
         for name in ("shift", "episodes", "policy", "data"):
@@ -108,6 +115,12 @@ class EvaluateOptions:
     )
     split: str = option(EvalConfig.split, "object split", choices=("train", "test"))
     seed: int = option(EvalConfig.seed, "scene seed: episode i is scene (seed, i), the same for every policy")
+    precision: str = option(
+        "fp32",
+        "the precision checkpoint policies act in: fp32, bf16 (CPU bfloat16) or auto (bf16 where the CPU has it); "
+        "reported with the results",
+        choices=PRECISIONS,
+    )
 
 
 # --- train ----------------------------------------------------------------------------------------------------------
@@ -213,6 +226,12 @@ class TrainOptions:
         metavar="SEED",
     )
     workers: int = option(1, "evaluation worker processes")
+    precision: str = option(
+        TrainConfig.precision,
+        "the network's passes: fp32, or bf16 (CPU bfloat16 autocast; weights and optimiser stay fp32), or auto "
+        "(bf16 where the CPU has it); recorded in the checkpoint",
+        choices=PRECISIONS,
+    )
 
 
 # --- continual and efficiency ---------------------------------------------------------------------------------------

@@ -10,20 +10,30 @@ import functools
 from collections.abc import Callable
 
 
-def policy_factory(ref: str, env_config, epsilon: float = 0.0, action_noise: float = 0.0) -> Callable:
+def policy_factory(
+    ref: str, env_config, epsilon: float = 0.0, action_noise: float = 0.0, precision: str = "fp32"
+) -> Callable:
     """``random`` | ``oracle[:NOISE]`` | ``ckpt:NAME[@...]`` -> a picklable policy factory.
 
     A checkpoint becomes its CEM policy (``nsl.learners.load_policy``), built
-    once in each worker; ``epsilon`` adds epsilon-greedy exploration and
-    ``action_noise`` Gaussian noise on every action.
+    once in each worker; ``epsilon`` adds epsilon-greedy exploration,
+    ``action_noise`` Gaussian noise on every action, and ``precision`` is what
+    its network computes in (``auto`` is resolved here, once, for every worker).
     """
     if ref.startswith("ckpt:") or ref == "base":
         from nsl.catalog import Catalog
         from nsl.learners import load_policy
+        from nsl.learners.precision import resolve_precision
 
         with Catalog() as cat:
             entry = resolve_init(cat, ref)
-        factory = functools.partial(load_policy, str(entry.path), epsilon=epsilon, action_noise=action_noise)
+        factory = functools.partial(
+            load_policy,
+            str(entry.path),
+            epsilon=epsilon,
+            action_noise=action_noise,
+            precision=resolve_precision(precision),
+        )
     else:
         from nsl.collectors import scripted_policy
 

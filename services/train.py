@@ -215,6 +215,7 @@ def train(
         lr_decay=o.lr_decay,
         weight_decay=o.weight_decay,
         shrink_perturb=sp,
+        precision=o.precision,
         **augment,
     )
     sampler = api.make_sampler(sources, n_step=config.n_step, gamma=config.gamma)

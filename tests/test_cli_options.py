@@ -39,7 +39,11 @@ FORBIDDEN = {
 }
 # ideas whose destination must use the canonical word
 WORDS = {"batch": "batch_size", "worker": "workers", "seed": "seed", "json": "json"}
-CLOSED = {"split": {"train", "test"}, "criterion": {"eval", "softopc", "auc", "td"}}
+CLOSED = {
+    "split": {"train", "test"},
+    "criterion": {"eval", "softopc", "auc", "td"},
+    "precision": {"fp32", "bf16", "auto"},
+}
 
 
 def _walk(parser: argparse.ArgumentParser, path: tuple[str, ...] = ()):
@@ -101,6 +105,10 @@ def test_closed_sets_match_the_libraries():
     from nsl.learners import METHODS
 
     assert set(train.METHODS) == set(METHODS) and set(train.CRITERIA) == set(CRITERIA)
+    from nsl.learners.precision import PRECISIONS
+    from nsl.services.options import PRECISIONS as OPTION_PRECISIONS
+
+    assert OPTION_PRECISIONS == PRECISIONS
 
 
 CONFIGURED = [(p, parser) for p, parser in PARSERS if parser.get_default("config") is not None]

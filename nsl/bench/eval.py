@@ -63,4 +63,25 @@ def run(args) -> dict:
         "cem": "64/6/2",
         "batch_per_worker": 8,
         "note": "one worker runs in-process with torch's default 2 threads; each of 2 workers uses 1 thread",
+        **_precision_rates(episodes),
+    }
+
+
+def _precision_rates(episodes: int) -> dict:
+    """The shipped base acting in fp32 and in bf16, 2 workers each, one after the other in this run."""
+    from nsl import workspace
+    from nsl.learners import load_policy
+    from nsl.learners.precision import bf16_supported
+
+    if not bf16_supported():
+        return {"bf16_supported": False}
+    base = str(workspace.shipped_base_dir())
+    fp32, fp32_steady = _rate(functools.partial(load_policy, base, precision="fp32"), episodes, 2)
+    bf16, bf16_steady = _rate(functools.partial(load_policy, base, precision="bf16"), episodes, 2)
+    return {
+        "bf16_supported": True,
+        "base_fp32_episodes_per_s_2_workers": round(fp32, 2),
+        "base_bf16_episodes_per_s_2_workers": round(bf16, 2),
+        "bf16_speedup": round(bf16 / fp32, 2),
+        "bf16_speedup_after_startup": round(bf16_steady / max(fp32_steady, 1e-9), 2),
     }

@@ -19,7 +19,13 @@ iterations).  They differ only in how the step is computed:
 Figures of work, from ``torch.utils.flop_counter.FlopCounterMode`` on one step
 of each side (forward and backward): ``gflop_per_step`` (nsl's step),
 ``gflop_per_s`` (achieved), ``peak_gflop_per_s`` (a large float32 matmul
-timed in the same run, with the same threads) and ``peak_fraction``.
+timed in the same run, with the same threads) and ``peak_fraction``
+(``peak_fraction_fp32``).
+
+On a CPU with bfloat16 arithmetic, the same update with ``precision="bf16"``
+(CPU autocast): ``bf16_steps_per_s``, ``bf16_speedup_vs_fp32`` (against
+``steps_per_s``, the float32 step, in this run), ``bf16_gflop_per_s`` and
+``peak_fraction_bf16`` against a bfloat16 matmul timed in this run.
 Everything is measured in this run, on this machine, one after the other.
 """
 
@@ -82,14 +88,15 @@ def _gflop(step_fn) -> float:
     return counter.get_total_flops() / 1e9
 
 
-def _peak_gflop_per_s(repeats: int) -> float:
-    """Achieved GFLOP/s of a large float32 matmul: the practical peak of this machine with these threads."""
+def _peak_gflop_per_s(repeats: int, dtype=None) -> float:
+    """Achieved GFLOP/s of a large matmul in ``dtype`` (default float32): this machine's practical peak."""
     import torch
 
+    dtype = dtype or torch.float32
     gen = torch.Generator().manual_seed(0)
-    a = torch.rand(PEAK_MATMUL, PEAK_MATMUL, generator=gen)
-    b = torch.rand(PEAK_MATMUL, PEAK_MATMUL, generator=gen)
-    out = torch.empty(PEAK_MATMUL, PEAK_MATMUL)
+    a = torch.rand(PEAK_MATMUL, PEAK_MATMUL, generator=gen).to(dtype)
+    b = torch.rand(PEAK_MATMUL, PEAK_MATMUL, generator=gen).to(dtype)
+    out = torch.empty(PEAK_MATMUL, PEAK_MATMUL, dtype=dtype)
     torch.mm(a, b, out=out)  # warm-up
     best = float("inf")
     for _ in range(repeats):
@@ -167,6 +174,7 @@ def run(args: argparse.Namespace) -> dict:
 
 def _run(args: argparse.Namespace, torch, np) -> dict:
     from nsl.learners import Learner, NetConfig, QNetwork, TrainConfig, update
+    from nsl.learners.precision import bf16_supported
     from nsl.learners.qtopt import batch_to_torch
 
     steps = args.steps or (20 if args.quick else 60)
@@ -198,7 +206,23 @@ def _run(args: argparse.Namespace, torch, np) -> dict:
     )
     peak = _peak_gflop_per_s(repeats=5 if args.quick else 20)
     achieved = gflop * ours_sps
+    bf16 = {}
+    if bf16_supported():
+        cfg16 = cfg.replace(precision="bf16")
+        ours16 = make_learner()
+        sps16 = _time(lambda i: update(ours16, batches[i % len(batches)], cfg16, i), warmup=3, steps=steps)
+        peak16 = _peak_gflop_per_s(repeats=5 if args.quick else 20, dtype=torch.bfloat16)
+        bf16 = {
+            "bf16_steps_per_s": round(sps16, 3),
+            "bf16_speedup_vs_fp32": round(sps16 / ours_sps, 2),
+            "bf16_gflop_per_s": round(gflop * sps16, 2),
+            "peak_bf16_gflop_per_s": round(peak16, 2),
+            "peak_fraction_bf16": round(gflop * sps16 / peak16, 4),
+        }
     return {
+        **bf16,
+        "bf16_supported": bf16_supported(),
+        "peak_fraction_fp32": round(achieved / peak, 4),
         "steps_per_s": round(ours_sps, 3),
         "baseline_steps_per_s": round(base_sps, 3),
         "speedup": round(ours_sps / base_sps, 2),

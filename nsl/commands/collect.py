@@ -35,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     for name in ("workers", "seed", "epsilon"):
         add_field(p, c, name)
     add_field(p, c, "action_noise", metavar="STD")
-    for name in ("batch_size", "split", "image_size", "episodes_per_file"):
+    for name in ("batch_size", "split", "image_size", "episodes_per_file", "precision"):
         add_field(p, c, name)
     p.add_argument("--restart", action="store_true", help="discard an unfinished collection of this dataset")
     p.add_argument("--stop-after-files", type=int, default=0, help=argparse.SUPPRESS)  # tests: simulate a kill

@@ -32,7 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="REF[,REF]",
         help="comma-separated policies: random | oracle[:NOISE] | ckpt:NAME (default: oracle)",
     )
-    for name in ("shift", "severity", "episodes", "workers", "batch_size", "split", "seed"):
+    for name in ("shift", "severity", "episodes", "workers", "batch_size", "split", "seed", "precision"):
         add_field(p, EvaluateOptions, name, **({"type": float} if name == "severity" else {}))
     out = p.add_mutually_exclusive_group()
     add_json(out, 'the results ({"results": {SHIFT: {...}}}, or per policy under "policies")')
@@ -57,7 +57,11 @@ def run(args: argparse.Namespace) -> int:
     table, comparisons = result.table, result.paired
     if args.json:
         per = {ref: {"results": {k: v.to_dict() for k, v in res.items()}} for ref, res in table.items()}
-        out = {"config": result.config.to_dict(), **(per[refs[0]] if len(refs) == 1 else {"policies": per})}
+        out = {
+            "config": result.config.to_dict(),
+            "precision": result.precision,
+            **(per[refs[0]] if len(refs) == 1 else {"policies": per}),
+        }
         if len(refs) == 1:
             out["policy"] = refs[0]
         if comparisons:
@@ -74,4 +78,6 @@ def run(args: argparse.Namespace) -> int:
                 print(f"{ref:<20} {name:<24} {r}")
     for s, c in comparisons.items():
         print(f"paired on {s}: {c}")
+    if any(r.startswith("ckpt:") or r == "base" for r in refs):
+        print(f"checkpoint policies acted in {result.precision}")
     return 0

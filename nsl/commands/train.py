@@ -45,6 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_field(p, c, "n_step", type=int)
     add_field(p, c, "crop", type=int)
     add_field(p, c, "net", action="append")
+    add_field(p, c, "precision")
     es = p.add_argument_group("early stopping (evaluates every --eval-every steps)")
     for name in ("eval_every", "eval_episodes", "base_episodes", "target_shift", "patience"):
         add_field(es, c, name)

@@ -1,0 +1,55 @@
+"""Numeric precision of the Q-network's passes: float32, or bfloat16 on CPUs that compute it natively.
+
+Weights, gradients and the optimiser's state stay float32 in both.  With
+``bf16`` the forward and backward passes run under
+``torch.autocast("cpu", dtype=torch.bfloat16)``: convolutions and matrix
+products take bfloat16 inputs (AVX-512 BF16 or AMX units) and accumulate in
+float32; the log loss and the Bellman targets are computed in float32.
+
+``auto`` resolves to ``bf16`` where the CPU supports it and to ``fp32``
+elsewhere; asking for ``bf16`` on a CPU without it is an error.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+
+import torch
+
+from nsl.errors import ConfigError
+
+PRECISIONS = ("fp32", "bf16", "auto")
+
+
+def bf16_supported() -> bool:
+    """True when this CPU has native bfloat16 arithmetic (AVX-512 BF16 or AMX tiles) that torch can use."""
+    cpu = getattr(torch._C, "_cpu", None)
+    if cpu is None:
+        return False
+    checks = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")
+    return any(bool(getattr(cpu, name, lambda: False)()) for name in checks)
+
+
+def resolve_precision(precision: str) -> str:
+    """``fp32``, ``bf16`` or ``auto`` -> ``fp32`` or ``bf16`` for this machine (one-line errors otherwise)."""
+    if precision not in PRECISIONS:
+        raise ConfigError(f"precision {precision!r} is unknown; use one of {', '.join(PRECISIONS)}")
+    if precision == "auto":
+        return "bf16" if bf16_supported() else "fp32"
+    if precision == "bf16" and not bf16_supported():
+        raise ConfigError(
+            "precision bf16 needs a CPU with AVX-512 BF16 or AMX (lscpu: avx512_bf16, amx_bf16); "
+            "use --precision fp32, or auto to pick what this machine has"
+        )
+    return precision
+
+
+@contextlib.contextmanager
+def autocast(precision: str) -> Iterator[None]:
+    """The passes inside run in ``precision`` (``fp32``: unchanged; ``bf16``: CPU autocast to bfloat16)."""
+    if precision == "bf16":
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            yield
+    else:
+        yield
