@@ -39,7 +39,7 @@ def test_imports_from_repo_root_and_elsewhere(tmp_path):
         assert Path(collectors).resolve() == ROOT / "collectors" / "__init__.py"
 
 
-def test_wheel_contains_the_five_subpackages(tmp_path):
+def test_wheel_contains_every_subpackage_and_the_api(tmp_path):
     out = subprocess.run(
         [
             sys.executable,
@@ -64,4 +64,5 @@ def test_wheel_contains_the_five_subpackages(tmp_path):
     assert "nsl/catalog/__init__.py" in names and "nsl/learners/__init__.py" in names
     assert "nsl/study/driver.py" in names and "nsl/study/plans/small.toml" in names
     assert "nsl/curriculum/tree.py" in names and "nsl/study/plans/transfer-small.toml" in names
+    assert "nsl/services/train.py" in names and "nsl/api.py" in names and "nsl/share/transports.py" in names
     assert not any(n.startswith("datasets/") for n in names), "a top-level datasets/ would shadow Hugging Face's"
