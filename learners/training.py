@@ -255,6 +255,7 @@ def train(
                     loss=f"{last_row['losses/q_loss']:.4f}",
                     q=f"{last_row['q/mean']:.3f}",
                     target=f"{last_row['q/target_mean']:.3f}",
+                    refresh=False,  # the bar redraws on its own schedule (in a log: a line every 30 s)
                 )
                 window, t0, n0 = {}, time.perf_counter(), 0
             evaluated = eval_fn is not None and config.eval_every and step % config.eval_every == 0

@@ -1,0 +1,132 @@
+"""Does bfloat16 training learn what float32 training learns?  The study's protocol in both precisions.
+
+Measures, in the workspace ``$NSL_HOME``:
+
+* for harsh lighting@2 and offset gripper@0.25: the shipped base collects 800 episodes (epsilon 0.1), and is
+  fine-tuned 50/50 with the scripted base data (the default recipe) with three seeds in ``--precision fp32``
+  and three in ``--precision bf16``; every fine-tune acts in fp32 on 1,000 selection scenes (seed 3000);
+* the shipped base itself acting in fp32 and in bf16 on the base task and both shifts, 1,000 selection scenes.
+
+Prints a Markdown table: each precision's mean success over seeds, and the difference (bf16 - fp32) with a 95%
+interval from the pooled episodes (3,000 against 3,000; the seeds' spread is printed beside it).  Every step
+resumes: collections and training runs continue where they stopped.
+
+    NSL_HOME=<a workspace with the scripted base data> python scripts/experiments/precision_equivalence.py
+
+The scripted base data is what ``scripts/collect_base_data.sh`` collects (``make demo`` does it too).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import time
+
+import nsl
+
+SHIFTS = ("harsh_lighting@2", "offset_gripper@0.25")
+BASE_MIX = ("grasp-base-oracle=0.27", "grasp-base-noisy=0.115", "grasp-base-random=0.115")
+
+
+def slug(shift: str) -> str:
+    return shift.replace("@", "-").replace("_", "-").replace(".", "")
+
+
+def interval(p1: float, n1: int, p2: float, n2: int) -> tuple[float, float]:
+    """95% Wald interval of p1 - p2 for independent samples (points)."""
+    se = math.sqrt(p1 * (1 - p1) / n1 + p2 * (1 - p2) / n2)
+    d = p1 - p2
+    return 100 * (d - 1.96 * se), 100 * (d + 1.96 * se)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", default="0,1,2")
+    ap.add_argument("--episodes", type=int, default=1000, help="evaluation scenes per cell")
+    ap.add_argument("--workers", type=int, default=2)
+    args = ap.parse_args()
+    seeds = [int(s) for s in args.seeds.split(",")]
+    rows = []
+    for shift in SHIFTS:
+        data = f"prec-{slug(shift)}-by-base"
+        nsl.collect(
+            shift=shift,
+            episodes=800,
+            policy="ckpt:base",
+            epsilon=0.1,
+            data=data,
+            seed=5,
+            workers=args.workers,
+            batch_size=8,
+            progress=False,
+        )
+        rates: dict[str, list[tuple[int, int]]] = {}
+        for precision in ("fp32", "bf16"):
+            for seed in seeds:
+                started = time.perf_counter()
+                run = nsl.train(
+                    data=[*BASE_MIX, f"{data}=0.5"],
+                    init="ckpt:base",
+                    seed=seed,
+                    precision=precision,
+                    name=f"prec-{slug(shift)}-{precision}-s{seed}",
+                    progress=False,
+                )
+                result = nsl.evaluate(
+                    run.checkpoint,
+                    shift=shift,
+                    episodes=args.episodes,
+                    seed=nsl.SELECTION_SCENES,
+                    workers=args.workers,
+                    progress=False,
+                    source="precision equivalence",
+                )
+                r = result.table[run.checkpoint][shift]
+                rates.setdefault(precision, []).append((r.successes, r.episodes))
+                print(f"{shift} {precision} seed {seed}: {r} ({time.perf_counter() - started:.0f} s)", flush=True)
+        rows.append((shift, rates))
+    base = nsl.evaluate(
+        "ckpt:base",
+        shift="base," + ",".join(SHIFTS),
+        episodes=args.episodes,
+        seed=nsl.SELECTION_SCENES,
+        workers=args.workers,
+        progress=False,
+    )
+    base16 = nsl.evaluate(
+        "ckpt:base",
+        shift="base," + ",".join(SHIFTS),
+        episodes=args.episodes,
+        seed=nsl.SELECTION_SCENES,
+        workers=args.workers,
+        progress=False,
+        precision="bf16",
+    )
+    print("\n| shift | fp32 fine-tunes (seeds) | bf16 fine-tunes (seeds) | bf16 - fp32 [95%] |")
+    print("|---|---|---|---|")
+    for shift, rates in rows:
+        cells = {}
+        for precision, rs in rates.items():
+            per = [100 * s / n for s, n in rs]
+            cells[precision] = (sum(s for s, _ in rs) / sum(n for _, n in rs), sum(n for _, n in rs), per)
+        (p32, n32, s32), (p16, n16, s16) = cells["fp32"], cells["bf16"]
+        lo, hi = interval(p16, n16, p32, n32)
+        spread = lambda xs: " / ".join(f"{x:.1f}" for x in xs)  # noqa: E731
+        print(
+            f"| {shift} | {100 * p32:.1f}% ({spread(s32)}; sd {statistics.pstdev(s32):.1f}) | "
+            f"{100 * p16:.1f}% ({spread(s16)}; sd {statistics.pstdev(s16):.1f}) | "
+            f"{100 * (p16 - p32):+.1f} [{lo:+.1f}, {hi:+.1f}] |"
+        )
+    print("\n| the shipped base on | acting in fp32 | acting in bf16 | bf16 - fp32 [95%] |")
+    print("|---|---|---|---|")
+    for shift, r32 in base.table["ckpt:base"].items():
+        r16 = base16.table["ckpt:base"][shift]
+        lo, hi = interval(r16.success_rate, r16.episodes, r32.success_rate, r32.episodes)
+        print(
+            f"| {shift} | {r32} | {r16} | {100 * (r16.success_rate - r32.success_rate):+.1f} [{lo:+.1f}, {hi:+.1f}] |"
+        )
+
+
+if __name__ == "__main__":
+    main()
