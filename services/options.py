@@ -11,7 +11,7 @@ command line's start-up stays quick.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from typing import Any
 
 from nsl.errors import ConfigError
@@ -29,13 +29,6 @@ METHOD_HELP = (
 def option(default: Any, help: str, **metadata: Any) -> Any:
     """A dataclass field whose default and help text the command line reads."""
     return field(default=default, metadata={"help": help, **metadata})
-
-
-def defaults(cls: type) -> dict[str, Any]:
-    """``{field name: default}`` of an options dataclass (fields without a default are left out)."""
-    from dataclasses import MISSING
-
-    return {f.name: f.default for f in fields(cls) if f.default is not MISSING}
 
 
 # --- collect --------------------------------------------------------------------------------------------------------
@@ -283,6 +276,5 @@ __all__ = [
     "EfficiencyConfig",
     "EvaluateOptions",
     "TrainOptions",
-    "defaults",
     "option",
 ]
