@@ -152,18 +152,34 @@ class QNetwork(nn.Module):
         else:
             self.coords = None
 
-    def _input(self, image: torch.Tensor) -> torch.Tensor:
-        x = image - 0.5
+    def input(self, image: torch.Tensor) -> torch.Tensor:
+        """The trunk's input: ``image - 0.5`` and the coordinate planes, in the caller's memory format.
+
+        It is written straight into one buffer (no concatenation, no layout copy). Under CPU autocast the
+        buffer is the autocast dtype, so the convolutions do not cast it again; the values are those the
+        cast would give. Networks that see the same images (the two target networks) can share it.
+        """
+        b, _, h, w = image.shape
+        channels_last = not image.is_contiguous() and image.is_contiguous(memory_format=torch.channels_last)
+        dtype = torch.get_autocast_dtype("cpu") if torch.is_autocast_enabled("cpu") else image.dtype
+        extra = 0 if self.coords is None else self.coords.shape[1]
+        fmt = torch.channels_last if channels_last else torch.contiguous_format
+        x = torch.empty((b, image.shape[1] + extra, h, w), dtype=dtype, memory_format=fmt)
+        pixels = x[:, : image.shape[1]]
+        if dtype == image.dtype:
+            torch.sub(image, 0.5, out=pixels)
+        else:
+            pixels.copy_(image - 0.5)
         if self.coords is not None:
-            channels_last = not image.is_contiguous() and image.is_contiguous(memory_format=torch.channels_last)
-            x = torch.cat([x, self.coords.expand(x.shape[0], -1, -1, -1)], 1)
-            if channels_last:  # keep the caller's memory format (the convolutions are faster in it)
-                x = x.contiguous(memory_format=torch.channels_last)
+            x[:, image.shape[1] :] = self.coords
         return x
 
     def encode(self, image: torch.Tensor, state: torch.Tensor) -> list[dict]:
         """Per-state context for :meth:`score`; ``image`` is float (B, 3, H, W) in [0, 1]."""
-        x = self._input(image)
+        return self.encode_input(self.input(image), state)
+
+    def encode_input(self, x: torch.Tensor, state: torch.Tensor) -> list[dict]:
+        """:meth:`encode` from the trunk's input :meth:`input` made."""
         caches: list[dict] = []
         for col in self.columns:
             caches.append(col.encode(x, state, caches))  # type: ignore[operator]  # torch stubs: ModuleList item is Module

@@ -102,10 +102,10 @@ def bellman_target(
     value = torch.zeros_like(reward)
     live = (done < 0.5).nonzero().squeeze(1)
     if len(live):
-        img, st = next_image[live], next_state[live]
-        ctx = polyak.encode(img, st)
+        x, st = polyak.input(next_image[live]), next_state[live]  # both target networks read the same input
+        ctx = polyak.encode_input(x, st)
         best, logit_polyak = cem_maximize(lambda cand: polyak.score(ctx, cand).float(), noise[live], cem)
-        logit_lagged = lagged(img, st, best).float()
+        logit_lagged = lagged.score(lagged.encode_input(x, st), best.unsqueeze(1)).squeeze(1).float()
         value[live] = torch.sigmoid(torch.minimum(logit_polyak, logit_lagged))
     return reward + gamma * (1.0 - done) * value, value
 

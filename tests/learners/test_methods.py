@@ -102,8 +102,8 @@ def test_progressive_network_leaves_the_base_column_unchanged(parent_checkpoint,
     assert child.cfg.columns == 2 and child.columns[0].n_lateral == 0 and child.columns[1].n_lateral == 1
     image, state, action = _inputs()
     with torch.no_grad():
-        base_before = parent.columns[0].encode(parent._input(image), state, [])
-        base_after = child.columns[0].encode(child._input(image), state, [])
+        base_before = parent.columns[0].encode(parent.input(image), state, [])
+        base_after = child.columns[0].encode(child.input(image), state, [])
         assert torch.equal(base_before["ctx"], base_after["ctx"])
         assert all(torch.equal(a, b) for a, b in zip(base_before["convs"], base_after["convs"]))
         column0 = child.columns[0].score(base_after, action.unsqueeze(1), [])[0]

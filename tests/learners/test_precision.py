@@ -77,3 +77,21 @@ def test_a_policy_acts_in_the_precision_asked_and_says_so(random_sampler, tmp_pa
     assert a16.shape == fp32(obs, rngs=rngs).shape and a16.dtype == np.float32
     q = bf16.q_values(obs, a16)
     assert q.dtype == np.float32 and np.all((q >= 0) & (q <= 1))
+
+
+@pytest.mark.parametrize("channels_last", [True, False])
+def test_the_trunk_input_is_the_images_and_coordinates_in_the_callers_layout_and_autocast_dtype(channels_last):
+    from nsl.learners import NetConfig, QNetwork
+    from nsl.learners.augment import to_float
+    from nsl.learners.networks import coordinate_planes
+
+    net = QNetwork(NetConfig(image_size=16))
+    pixels = torch.randint(0, 256, (3, 16, 16, 3), dtype=torch.uint8, generator=torch.Generator().manual_seed(0))
+    image = to_float(pixels, channels_last=channels_last)
+    expected = torch.cat([image - 0.5, coordinate_planes(16).expand(3, -1, -1, -1)], 1)
+    x = net.input(image)
+    assert torch.equal(x, expected) and x.dtype == torch.float32
+    assert x.is_contiguous(memory_format=torch.channels_last if channels_last else torch.contiguous_format)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        x16 = net.input(image)
+    assert x16.dtype == torch.bfloat16 and torch.equal(x16, expected.to(torch.bfloat16))  # what the cast would give
