@@ -258,7 +258,8 @@ def _data_mix(p: Mapping[str, Any]) -> list[tuple[str, float]]:
             )
         mix.append((refs[-1] if b["hash"] else f"{refs[-1]}:{b['episodes']}", float(b["weight"])))
     t = p["target"]
-    mix.append((f"{t['dataset']}:{t['tier']}", float(t["weight"])))
+    if t is not None:  # None: a run on base data alone (the no_target baseline)
+        mix.append((f"{t['dataset']}:{t['tier']}", float(t["weight"])))
     return mix
 
 

@@ -33,6 +33,15 @@ def study_dir(name: str) -> Path:
     return workspace.home() / "studies" / name
 
 
+def _same_plan(saved: dict, plan) -> bool:
+    """True when a study's saved plan is ``plan``; settings added since it was saved count at their defaults."""
+    try:
+        again = parse_plan(saved, default_name=plan.name).to_dict()
+    except (ConfigError, UnknownReferenceError):
+        return False
+    return json.loads(json.dumps(again)) == json.loads(json.dumps(plan.to_dict()))
+
+
 def prepare(plan_ref: str, name: str | None = None):
     """Load and check everything (plan, workspace, base data) and build the graph; writes nothing."""
     plan = load_plan(plan_ref)
@@ -40,7 +49,7 @@ def prepare(plan_ref: str, name: str | None = None):
     if not name.replace("-", "").replace("_", "").isalnum():
         raise ConfigError(f"--name {name!r} must use letters, digits, '-' and '_'")
     saved = study_dir(name) / PLAN_FILE
-    if saved.is_file() and json.loads(saved.read_text()) != json.loads(json.dumps(plan.to_dict())):
+    if saved.is_file() and not _same_plan(json.loads(saved.read_text()), plan):
         raise ConfigError(
             f"study {name!r} exists with a different plan ({saved}); run it with the same plan to "
             "resume, or choose another --name"

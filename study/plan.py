@@ -29,9 +29,14 @@ from pathlib import Path
 from typing import Any
 
 from nsl.errors import ConfigError, UnknownReferenceError
+from nsl.scenes import REPORTING_SCENES, SELECTION_SCENES
 
 SHIPPED = ("tiny", "small", "full", "paper")
 BASE_DATA_SOURCES = ("checkpoint", "plan")
+# Baselines that are not a fine-tuning method of their own: what each one leaves out separates a cause of the gain.
+#   scratch_target  random initialisation, trained on the target data alone (no base half)
+#   no_target       the base fine-tuned with the same recipe and steps on the base data alone (no target data)
+STUDY_BASELINES = ("scratch_target", "no_target")
 
 
 @dataclass(frozen=True)
@@ -69,15 +74,22 @@ class Collect:
 @dataclass(frozen=True)
 class Eval:
     episodes: int = 50  # test-object episodes per (checkpoint, task); every table uses these
-    seed: int = 2000  # scene seed: all evaluations are paired on the same scenes
+    seed: int = REPORTING_SCENES  # reporting scenes: every table's evaluations are paired on them
+    selection_seed: int = SELECTION_SCENES  # selection scenes: every choice (the early-stopping curve's criteria)
 
 
 @dataclass(frozen=True)
 class Finetune:
     tiers: tuple[int, ...] = (25, 50, 100, 200, 400, 800)  # target episodes, nested first-K views
     steps: int = 2000  # gradient steps per fine-tuning run (the fine-tuning recipe's, nsl.learners.FINE_TUNE_STEPS)
-    seeds: tuple[int, ...] = (0,)  # training seeds; a cell pools its seeds' episodes
-    baselines: tuple[str, ...] = ("scratch", "new_head")  # methods trained at the top tier for comparison
+    seeds: tuple[int, ...] = (0,)  # training seeds of the top tier and the baselines (mean over seeds, and pooled)
+    tier_seeds: tuple[int, ...] | None = None  # training seeds of the lower tiers (None: the same as seeds)
+    baselines: tuple[str, ...] = ("scratch", "new_head")  # trained at the top tier: methods, or STUDY_BASELINES
+    cross_shift: bool = False  # evaluate the top tier's fine-tunes on every other shift too (forgetting of shifts)
+
+    def seeds_of(self, tier: int) -> tuple[int, ...]:
+        """The training seeds of a tier."""
+        return self.seeds if tier == self.tiers[-1] or self.tier_seeds is None else self.tier_seeds
 
 
 @dataclass(frozen=True)
@@ -91,7 +103,7 @@ class Continual:
     )
     episodes: int = 800  # episodes each stage's policy collects in its shift
     steps: int = 2000  # gradient steps per stage (the fine-tuning recipe's)
-    seed: int = 0  # training seed
+    seeds: tuple[int, ...] = (0,)  # training seeds: one whole sequence each (a plan's ``seed = S`` is ``seeds = [S]``)
 
 
 @dataclass(frozen=True)
@@ -188,7 +200,12 @@ def parse_plan(data: dict[str, Any], source: str = "", default_name: str = "stud
         if data[key] in (False, None) and key in ("continual", "curves", "early_stop"):
             sections[key] = None  # `continual = false` switches an experiment off
             continue
-        sections[key] = _build(cls, data[key], key)
+        table = data[key]
+        if key == "continual" and isinstance(table, dict) and "seed" in table:
+            if "seeds" in table:
+                raise ConfigError("plan [continual] sets both seed and seeds; keep seeds = [...]")
+            table = {**{k: v for k, v in table.items() if k != "seed"}, "seeds": [table["seed"]]}
+        sections[key] = _build(cls, table, key)
     top.setdefault("name", default_name)
     plan = _build(Plan, {**top}, "plan")
     plan = Plan(**{**{f.name: getattr(plan, f.name) for f in fields(Plan)}, **sections, "source": source})
@@ -261,12 +278,12 @@ def _shift(name: str, what: str) -> str:
     return spec.name
 
 
-def _method(name: str, what: str) -> None:
+def _method(name: str, what: str, also: tuple[str, ...] = ()) -> None:
     from nsl.errors import unknown
     from nsl.learners import METHODS
 
     if name not in METHODS:
-        raise unknown("method", name, METHODS, f"(plan {what})")
+        raise unknown("method", name, (*METHODS, *also), f"(plan {what})")
 
 
 def validate(plan: Plan) -> None:
@@ -311,6 +328,15 @@ def validate(plan: Plan) -> None:
     if not 0.0 <= c.epsilon <= 1.0:
         raise ConfigError(f"plan collect.epsilon = {c.epsilon!r} must be in [0, 1]")
     _positive(plan.eval.episodes, "eval.episodes")
+    e = plan.eval
+    for k in ("seed", "selection_seed"):
+        if not isinstance(getattr(e, k), int) or getattr(e, k) < 0:
+            raise ConfigError(f"plan eval.{k} = {getattr(e, k)!r} must be a scene seed >= 0")
+    if e.seed == e.selection_seed:
+        raise ConfigError(
+            f"plan eval.seed and eval.selection_seed are both {e.seed}: the same scenes would choose and report; "
+            "give the reporting scenes another seed"
+        )
     f = plan.finetune
     if not f.tiers or list(f.tiers) != sorted(set(f.tiers)):
         raise ConfigError(f"plan finetune.tiers = {list(f.tiers)!r} must be increasing episode counts")
@@ -323,14 +349,22 @@ def validate(plan: Plan) -> None:
         )
     _positive(f.steps, "finetune.steps")
     _seeds(f.seeds, "finetune.seeds")
+    if f.tier_seeds is not None:
+        _seeds(f.tier_seeds, "finetune.tier_seeds")
+    if not isinstance(f.cross_shift, bool):
+        raise ConfigError(f"plan finetune.cross_shift = {f.cross_shift!r} must be true or false")
     for m in f.baselines:
-        _method(m, "finetune.baselines")
+        if m not in STUDY_BASELINES:
+            _method(m, "finetune.baselines", STUDY_BASELINES)
+    if len(set(f.baselines)) != len(f.baselines):
+        raise ConfigError(f"plan finetune.baselines = {list(f.baselines)!r} repeats a baseline")
     if plan.continual is not None:
         s = plan.continual
         seq = [_shift(x, "continual.sequence") for x in s.sequence]
         if not seq or len(set(seq)) != len(seq):
             raise ConfigError(f"plan continual.sequence = {list(s.sequence)!r} must name distinct shifts")
         _positive(s.episodes, "continual.episodes")
+        _seeds(s.seeds, "continual.seeds")
         _positive(s.steps, "continual.steps")
         if s.episodes > c.episodes:
             raise ConfigError(

@@ -19,11 +19,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from nsl.eval import CurveRow, PerformanceMatrix, choose_steps, continual_metrics, wilson_interval
+from nsl.eval import (
+    CriterionChoice,
+    CurveRow,
+    PerformanceMatrix,
+    Rate,
+    choose_steps,
+    continual_metrics,
+    wilson_interval,
+)
 
 from . import reference as ref
 from .plan import Plan
-from .units import BASE_POLICY, continual_tags, train_tag
+from .units import BASE_POLICY, continual_tags, no_target_tag, train_tag
 
 REPORT_FILE = "report.md"
 RECORDS_FILE = "records.json"
@@ -64,6 +72,31 @@ def pooled(items: Sequence[Mapping | None]) -> Count | None:
     if not cs or any(c is None for c in cs):
         return None
     return Count(sum(c.successes for c in cs), sum(c.episodes for c in cs))
+
+
+def seed_mean(items: Sequence[Mapping | None]) -> tuple[float, float] | None:
+    """(mean success over seeds, half-width of its 95% t interval) with two or more seeds, else None."""
+    cs = [count(d) for d in items]
+    if len(cs) < 2 or any(c is None for c in cs):
+        return None
+    from scipy import stats
+
+    rates = [c.rate for c in cs]
+    mean = sum(rates) / len(rates)
+    sd = math.sqrt(sum((r - mean) ** 2 for r in rates) / (len(rates) - 1))
+    return mean, float(stats.t.ppf(0.975, len(rates) - 1)) * sd / math.sqrt(len(rates))
+
+
+def seeds_cell(items: Sequence[Mapping | None]) -> str:
+    """A cell over training seeds: the seed mean with its t interval, then the pooled Wilson interval."""
+    c = pooled(items)
+    if c is None:
+        return "-"
+    m = seed_mean(items)
+    if m is None:
+        return c.pct()
+    lo, hi = c.ci
+    return f"{100 * m[0]:.0f}% ±{100 * m[1]:.0f} (pooled [{100 * lo:.0f}-{100 * hi:.0f}])"
 
 
 def diff_interval(a: Count, b: Count) -> tuple[float, float, float]:
@@ -113,22 +146,35 @@ def gather(plan: Plan, study: str, evaluation, read_curve_file) -> dict[str, Any
     for shift in shifts:
         row: dict[str, Any] = {"tiers": {}, "tiers_base": {}, "baselines": {}, "baselines_base": {}}
         for k in f.tiers:
-            tags = [train_tag("ft", shift, k, f.steps, s) for s in f.seeds]
+            tags = [train_tag("ft", shift, k, f.steps, s) for s in f.seeds_of(k)]
             row["tiers"][str(k)] = [ev(t, shift) for t in tags]
             row["tiers_base"][str(k)] = [ev(t, "base") for t in tags]
         for m in f.baselines:
-            tags = [train_tag(m, shift, top, f.steps, s) for s in f.seeds]
+            tags = [
+                no_target_tag(f.steps, s) if m == "no_target" else train_tag(m, shift, top, f.steps, s) for s in f.seeds
+            ]
             row["baselines"][m] = [ev(t, shift) for t in tags]
             row["baselines_base"][m] = [ev(t, "base") for t in tags]
+        if f.cross_shift:  # the top tier on every shift of the plan
+            tags = [train_tag("ft", shift, top, f.steps, s) for s in f.seeds]
+            row["cross_shift"] = {other: [ev(t, other) for t in tags] for other in shifts}
         tiers[shift] = row
     out["finetune"] = tiers
     if plan.continual is not None:
         c = plan.continual
         tasks = ["base", *c.sequence]
+
+        def over_seeds(tags: Sequence[str], task: str) -> dict | None:  # a cell pools the seeds' sequences
+            got = pooled([ev(t, task) for t in tags])
+            return None if got is None else got.to_dict()
+
         stages = [[ev(BASE_POLICY, t) for t in tasks]]
-        for tag in continual_tags(plan):
-            stages.append([ev(tag, t) for t in tasks])
-        single = {s: ev(train_tag("ft", s, c.episodes, c.steps, c.seed), s) for s in c.sequence}
+        per_seed = [continual_tags(plan, seed) for seed in c.seeds]
+        for i in range(len(c.sequence)):
+            stages.append([over_seeds([tags[i] for tags in per_seed], t) for t in tasks])
+        single = {
+            s: over_seeds([train_tag("ft", s, c.episodes, c.steps, seed) for seed in c.seeds], s) for s in c.sequence
+        }
         out["continual"] = {"tasks": tasks, "stages": ["base policy", *c.sequence], "cells": stages, "single": single}
     if plan.curves is not None:
         cv = plan.curves
@@ -192,8 +238,8 @@ def tiers_table(records: Mapping[str, Any]) -> str:
     for shift, row in records["finetune"].items():
         base = count(records["base_policy"].get(shift))
         cells = [_pretty(shift), "ours", "-" if base is None else base.pct()]
-        cells += ["-" if (c := pooled(row["tiers"][str(k)])) is None else c.pct() for k in tiers]
-        cells += ["-" if (c := pooled(row["baselines"][m])) is None else c.pct() for m in baselines]
+        cells += [seeds_cell(row["tiers"][str(k)]) for k in tiers]
+        cells += [seeds_cell(row["baselines"].get(m, [])) for m in baselines]
         lines.append("| " + " | ".join(cells) + " |")
         study = ref.FINETUNE.get(ref.study_shift(shift))
         if study is not None:
@@ -209,7 +255,7 @@ def tiers_table(records: Mapping[str, Any]) -> str:
 
 
 def tiers_base_table(records: Mapping[str, Any]) -> str:
-    """The same fine-tuned checkpoints on the base task (forgetting), with the study's base-task row."""
+    """The same fine-tuned checkpoints on the base task (forgetting); the study's base-task row only as a note."""
     plan = records["plan"]
     tiers = plan["finetune"]["tiers"]
     baselines = plan["finetune"]["baselines"]
@@ -218,22 +264,26 @@ def tiers_base_table(records: Mapping[str, Any]) -> str:
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for shift, row in records["finetune"].items():
         cells = [_pretty(shift), "-" if base is None else base.pct()]
-        cells += ["-" if (c := pooled(row["tiers_base"][str(k)])) is None else c.pct() for k in tiers]
-        cells += ["-" if (c := pooled(row["baselines_base"][m])) is None else c.pct() for m in baselines]
+        cells += [seeds_cell(row["tiers_base"][str(k)]) for k in tiers]
+        cells += [seeds_cell(row["baselines_base"].get(m, [])) for m in baselines]
         lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join([*lines, "", study_base_row_note()])
+
+
+def study_base_row_note() -> str:
+    """Why the study's base-task row of Table 5.2 is not beside our shift fine-tunes on the base task."""
     s = ref.FINETUNE["base"]
-    lines.append(
-        "| study (base task, real robot) | "
-        + " | ".join(
-            [
-                f"{s['base']}%",
-                *[f"{s[k]}%" if k in s else "-" for k in tiers],
-                *[f"{s[m]}%" if m in s else "-" for m in baselines],
-            ]
-        )
-        + " |"
+    figures = [
+        f"base policy {s['base']}%",
+        *[f"{k}: {s[k]}%" for k in ref.TIERS],
+        *[f"{m} {s[m]}%" for m in s if isinstance(m, str) and m != "base"],
+    ]
+    return (
+        "No study figure is put beside these rows: the study's base-task row of Table 5.2 ("
+        + ", ".join(figures)
+        + ") is a fine-tune on base-task data, not its shift fine-tunes evaluated on the base task, "
+        "so it is not comparable to this table."
     )
-    return "\n".join(lines)
 
 
 def continual_matrix(records: Mapping[str, Any]) -> PerformanceMatrix | None:
@@ -291,6 +341,37 @@ def continual_table(records: Mapping[str, Any]) -> str:
             f"no forgetting found | - |"
         )
     return "\n".join(lines)
+
+
+def cross_shift_table(records: Mapping[str, Any]) -> str:
+    """The top tier's fine-tunes on every shift: change against the base policy on that shift (seed mean)."""
+    plan = records["plan"]
+    shifts = plan["shifts"]
+    rows = {s: r["cross_shift"] for s, r in records["finetune"].items() if r.get("cross_shift")}
+    if not rows:
+        return "(no cross-shift evaluations: set finetune.cross_shift = true)"
+    head = ["fine-tuned for (rows), evaluated on (columns)", *[_pretty(s) for s in shifts]]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    base = [count(records["base_policy"].get(s)) for s in shifts]
+    lines.append("| base policy | " + " | ".join("-" if b is None else b.pct() for b in base) + " |")
+    for shift, row in rows.items():
+        cells = []
+        for other, b in zip(shifts, base):
+            c = pooled(row[other])
+            cells.append("-" if c is None else c.pct() + ("" if b is None else f" ({points(c, b)})"))
+        lines.append(f"| {_pretty(shift)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def cross_shift_forgetting(records: Mapping[str, Any]) -> tuple[float, int] | None:
+    """Mean change (fraction) of the top tier's fine-tunes on the shifts they were not trained on, and the pairs."""
+    changes = []
+    for shift, row in records["finetune"].items():
+        for other, items in (row.get("cross_shift") or {}).items():
+            c, b = pooled(items), count(records["base_policy"].get(other))
+            if other != shift and c is not None and b is not None:
+                changes.append(c.rate - b.rate)
+    return (sum(changes) / len(changes), len(changes)) if changes else None
 
 
 def matrix_table(records: Mapping[str, Any]) -> str:
@@ -403,7 +484,7 @@ def early_stop_table(records: Mapping[str, Any]) -> str:
 class Finding:
     key: str  # a..e
     claim: str
-    holds: bool | None  # None: not measured (no results yet, or no choice)
+    holds: bool | None  # None: not measured (no results yet, no choice, or too few scenes to resolve it)
     ours: str  # our numbers, with intervals
     study: str  # the study's numbers
 
@@ -413,7 +494,7 @@ class Finding:
 
 
 def findings(records: Mapping[str, Any]) -> list[Finding]:
-    """Findings (a)-(e) of the study, tested on our numbers (point estimates decide; intervals are shown)."""
+    """Findings (a)-(e) on our numbers beside the study's, shift by shift in the plan's order."""
     plan = records["plan"]
     bp = records["base_policy"]
     base = count(bp.get("base"))
@@ -434,13 +515,7 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
             "drops of " + "; ".join(f"{_pretty(s)} {points(a, b)}" for s, (a, b) in measured.items())
             if measured
             else "-",
-            "drops of "
-            + "; ".join(
-                f"{_pretty(ref.study_shift(s))} {ref.STUDY_DROPS[ref.study_shift(s)]}"
-                for s in plan["shifts"]
-                if ref.study_shift(s) in ref.STUDY_DROPS
-            )
-            + " points (10-55)",
+            study_drops(plan["shifts"]),
         )
     )
     # (b) fine-tuning on the top tier gains at least the study's +27 points on average; reaches base on 2 of 5
@@ -458,12 +533,14 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
     if len(gains) < n:
         holds_b = None
     else:
-        holds_b = sum(gains) / n >= ref.STUDY_MEAN_GAIN_800 / 100 and len(reached) >= 2 * n / 5
+        share = len(ref.STUDY_REACHED_BASE) / len(ref.CHALLENGE)
+        holds_b = sum(gains) / n >= ref.STUDY_MEAN_GAIN_800 / 100 and len(reached) >= share * n
     out.append(
         Finding(
             "b",
-            f"fine-tuning on {top} episodes gains at least as much as the study's (mean +27 points; reaches the base "
-            "policy's base-task success on 2 of 5 shifts)",
+            f"fine-tuning on {top} episodes gains at least as much as the study's (mean {ref.STUDY_MEAN_GAIN_800:+d} "
+            f"points; reaches the base policy's base-task success on {len(ref.STUDY_REACHED_BASE)} of "
+            f"{len(ref.CHALLENGE)} shifts)",
             holds_b,
             (
                 f"mean {100 * sum(gains) / len(gains):+.0f} points ({'; '.join(parts)}); reaches the base policy's "
@@ -472,7 +549,7 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
             )
             if gains
             else "-",
-            "mean +27 points over the five shifts (800 attempts); 2 of 5 reached 86% (checkerboard, offset gripper)",
+            study_gains(plan["shifts"]),
         )
     )
     # (c) fine-tuning beats scratch at the top tier by 30 points or more
@@ -491,7 +568,7 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
             f"fine-tuning beats scratch at {top} episodes by 30 points or more on every shift",
             holds_c,
             "; ".join(parts) or "-",
-            "+" + ", +".join(str(v[800] - v["scratch"]) for k, v in ref.FINETUNE.items() if k != "base") + " points",
+            study_over_scratch(plan["shifts"], top),
         )
     )
     # (d) the continual sequence loses 5 points or less on the base task
@@ -510,34 +587,129 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
             "the continual sequence loses 5 points or less on the base task",
             holds_d,
             ours_d,
-            "no forgetting of the base task was found",
+            ref.NO_FORGETTING,
         )
     )
     # (e) an offline stopping criterion lands within 5 points of the best point
-    choices = early_stop_choices(records)
-    holds_e, ours_e = None, "-"
-    if choices and choices.get("best") is not None:
-        best = choices["best"]
-        parts, regrets = [], []
-        for crit in [c for c in choices if c in OFFLINE_CRITERIA]:
-            ch = choices[crit]
-            if ch is None or ch.target_regret is None:
-                parts.append(f"{crit}: no choice")
-                continue
-            regrets.append(ch.target_regret)
-            parts.append(f"{crit}: step {ch.step}, {ch.target.percent()}, {100 * ch.target_regret:.0f} points below")
-        holds_e = None if not regrets else min(regrets) <= 0.05 + 1e-12
-        ours_e = f"best point step {best.step}, {best.target.percent()}; " + "; ".join(parts)
+    holds_e, ours_e = early_stop_finding(records)
     out.append(
         Finding(
             "e",
             "an offline stopping criterion lands within 5 points of the best point",
             holds_e,
             ours_e,
-            "not solved in the study (" + ref.EARLY_STOP + ")",
+            f"not solved in the study ({_pretty(ref.EARLY_STOP_SHIFT)}, {ref.EARLY_STOP_ATTEMPTS} attempts: "
+            f"{ref.EARLY_STOP})",
         )
     )
+    # (f) a fine-tune for one shift loses success on the others: what a sequence of shifts must overcome
+    if plan["finetune"].get("cross_shift"):
+        cross = cross_shift_forgetting(records)
+        out.append(
+            Finding(
+                "f",
+                "a fine-tune for one shift loses success on the other shifts",
+                None if cross is None else cross[0] < 0,
+                "-"
+                if cross is None
+                else f"{100 * cross[0]:+.1f} points on average over {cross[1]} (shift, other) "
+                "pairs against the base policy (the cross-shift table has each pair's interval)",
+                "not measured in the study (its sequence found little forgetting of earlier shifts, Table 5.3)",
+            )
+        )
     return out
+
+
+def study_figures(shifts: Sequence[str], table: Mapping[str, int]) -> list[tuple[str, int | None]]:
+    """The study's figure for each of the plan's shifts, in the plan's order (None: the study has none)."""
+    return [(s, table.get(ref.study_shift(s))) for s in shifts]
+
+
+def _signed(v: int | None) -> str:
+    return "-" if v is None else f"{v:+d}"
+
+
+def study_drops(shifts: Sequence[str]) -> str:
+    """(a) in the study: the base policy's drop on each of the plan's shifts (Table 5.1) and their range."""
+    figs = study_figures(shifts, ref.STUDY_DROPS)
+    known = [v for _, v in figs if v is not None]
+    listed = "; ".join(f"{_pretty(ref.study_shift(s))} {'-' if v is None else v}" for s, v in figs)
+    return f"drops of {listed} points" + (f" ({min(known)}-{max(known)})" if known else "")
+
+
+def study_gains(shifts: Sequence[str]) -> str:
+    """(b) in the study: the top tier's gain on each of the plan's shifts (Table 5.2), its mean, who reached 86%."""
+    figs = study_figures(shifts, ref.STUDY_GAINS)
+    known = [(s, v) for s, v in figs if v is not None]
+    listed = "; ".join(f"{_pretty(ref.study_shift(s))} {_signed(v)}" for s, v in figs)
+    if not known:
+        return f"gains at {ref.TOP} attempts: {listed} points"
+    mean = f"mean {sum(v for _, v in known) / len(known):+.0f}"
+    reached = [s for s, _ in known if ref.study_shift(s) in ref.STUDY_REACHED_BASE]
+    every = sorted(ref.study_shift(s) for s, _ in known) == sorted(ref.STUDY_GAINS)
+    if not every:
+        mean += f"; {ref.STUDY_MEAN_GAIN_800:+d} over its {len(ref.STUDY_GAINS)} shifts"
+    return (
+        f"gains at {ref.TOP} attempts: {listed} points ({mean}); {len(reached)} of {len(known)} reached its "
+        f"base-task {ref.BASE_TASK}%"
+        + (f" ({', '.join(_pretty(ref.study_shift(s)) for s in reached)})" if reached else "")
+        + ("" if every else f" ({len(ref.STUDY_REACHED_BASE)} of its {len(ref.CHALLENGE)})")
+    )
+
+
+def study_over_scratch(shifts: Sequence[str], top: str) -> str:
+    """(c) in the study: fine-tuning minus scratch at its top tier on each of the plan's shifts (Table 5.2)."""
+    listed = ", ".join(_signed(v) for _, v in study_figures(shifts, ref.STUDY_OVER_SCRATCH))
+    return f"{listed} points" + ("" if str(top) == str(ref.TOP) else f" (at {ref.TOP} attempts)")
+
+
+def _curve_count(rate: Rate | None) -> Count | None:
+    """A curve point's target success as a count (None: not measured or its episodes unknown)."""
+    if rate is None or not rate.episodes:
+        return None
+    return Count(round(rate.success_rate * rate.episodes), rate.episodes)
+
+
+def stop_within(best: CriterionChoice, chosen: CriterionChoice, margin: float = 0.05) -> tuple[bool | None, str]:
+    """Whether a choice lands within ``margin`` of the best point (None: its interval cannot tell), in words."""
+    if chosen.step == best.step:
+        return True, "the best point"
+    b, c = _curve_count(best.target), _curve_count(chosen.target)
+    if b is None or c is None:
+        return None, f"{100 * (chosen.target_regret or 0.0):.0f} points below (scenes unknown: not resolvable)"
+    d, lo, hi = diff_interval(b, c)
+    text = f"{100 * d:.0f} [{100 * lo:+.0f}, {100 * hi:+.0f}] points below"
+    if hi <= margin + 1e-12:
+        return True, f"{text}: within {100 * margin:.0f} points"
+    if lo > margin + 1e-12:
+        return False, f"{text}: more than {100 * margin:.0f} points below"
+    return None, f"{text}: not resolvable at {min(b.episodes, c.episodes)} scenes per point"
+
+
+def early_stop_finding(records: Mapping[str, Any]) -> tuple[bool | None, str]:
+    """(e) on our curve: does an offline criterion resolvably land within 5 points of the best point?"""
+    choices = early_stop_choices(records)
+    best = choices.get("best")
+    if best is None or best.target is None:
+        return None, "-"
+    parts, verdicts = [], []
+    for crit in [c for c in choices if c in OFFLINE_CRITERIA]:
+        ch = choices[crit]
+        if ch is None or ch.target is None:
+            parts.append(f"{crit}: no choice")
+            continue
+        within, words = stop_within(best, ch)
+        verdicts.append(within)
+        parts.append(f"{crit}: step {ch.step}, {ch.target.percent()}, {words}")
+    scenes = best.target.episodes or records["plan"]["early_stop"]["eval_episodes"]
+    ours = f"best point step {best.step}, {best.target.percent()} ({scenes} scenes per point); " + "; ".join(parts)
+    if not verdicts:
+        return None, ours
+    if any(verdicts):
+        return True, ours
+    if all(v is False for v in verdicts):
+        return False, ours
+    return None, ours + f"; the differences cannot be resolved at {scenes} scenes per point"
 
 
 def findings_table(items: Sequence[Finding]) -> str:
@@ -651,6 +823,11 @@ def _save(fig, path: Path) -> Path:
 # --- the document ---------------------------------------------------------------------------------------------------
 
 
+def _lower_tier_seeds(f: Mapping[str, Any]) -> str:
+    seeds = f.get("tier_seeds")
+    return "" if seeds is None else f" (lower tiers: seeds {', '.join(map(str, seeds))})"
+
+
 def _recipe_note(recipe: Mapping[str, Any] | None) -> str:
     """What the fine-tunes' checkpoints record beyond the plan: the rate, n-step, crop and conservative term."""
     if not recipe:
@@ -696,8 +873,12 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
         "",
         f"Fine-tune all parameters from the base, batches 50/50 base data and the first K target episodes, "
         f"25% of the base's learning rate and its n-step returns and crop, {plan['finetune']['steps']} steps"
-        f"{_recipe_note(records.get('recipe'))}, seeds "
-        f"{', '.join(map(str, plan['finetune']['seeds']))} (pooled). Success on the shift:",
+        f"{_recipe_note(records.get('recipe'))}; training seeds "
+        f"{', '.join(map(str, plan['finetune']['seeds']))} for the top tier and the baselines"
+        f"{_lower_tier_seeds(plan['finetune'])}. With several seeds a cell is the seed mean ± its 95% t interval, "
+        "then the pooled Wilson interval. Baselines: scratch is a random initialisation with the same data mix, "
+        "scratch_target one on the target data alone, no_target the base fine-tuned on base data alone. "
+        "Success on the shift:",
         "",
         tiers_table(records),
         "",
@@ -705,6 +886,13 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
     if "tiers" in figures:
         parts += [f"![fine-tuning by data size]({figures['tiers']})", ""]
     parts += ["The same checkpoints on the base task:", "", tiers_base_table(records), ""]
+    if plan["finetune"].get("cross_shift"):
+        parts += [
+            "The top tier's fine-tunes on every shift (change against the base policy on that shift; seeds pooled):",
+            "",
+            cross_shift_table(records),
+            "",
+        ]
     if plan.get("continual"):
         parts += [
             "## The continual sequence (Table 5.3)",

@@ -15,7 +15,8 @@ Names (``S`` is the study name; datasets and checkpoints are prefixed with it)::
     eval:POLICY:SHIFT                   an evaluation of a checkpoint on SHIFT (plan's episodes and scene seed)
 
 Train tags: ``ft-SHIFT-nK-kSTEPS-sSEED`` (fine-tune from the base on the first K
-target episodes; ``scratch-...``, ``new_head-...`` for the baselines),
+target episodes; ``scratch-...``, ``new_head-...``, ``scratch_target-...`` for the
+baselines, and ``no_target-kSTEPS-sSEED``, the base fine-tuned on base data alone),
 ``cI-SHIFT-...`` (continual stage I >= 2, from stage I-1),
 ``curve-METHOD-...`` and ``es-...`` (runs that record a success curve).
 
@@ -69,6 +70,11 @@ def train_tag(method: str, shift: str, episodes: int, steps: int, seed: int, pre
     return f"{prefix or method}-{slug(shift)}-n{episodes}-k{steps}-s{seed}"
 
 
+def no_target_tag(steps: int, seed: int) -> str:
+    """The ``no_target`` baseline's train tag: one run per seed serves every shift."""
+    return f"no_target-k{steps}-s{seed}"
+
+
 def base_data_units(base: list[BaseSource]) -> list[Unit]:
     """A collect unit for each base dataset with a recipe (done at once when the workspace holds it)."""
     return [
@@ -78,9 +84,9 @@ def base_data_units(base: list[BaseSource]) -> list[Unit]:
     ]
 
 
-def base_mix(base: list[BaseSource]) -> list[dict[str, Any]]:
-    """The base half of every batch (a train unit's ``base`` parameter): each dataset at half its weight."""
-    return [{"dataset": b.dataset, "hash": b.hash, "episodes": b.episodes, "weight": 0.5 * b.weight} for b in base]
+def base_mix(base: list[BaseSource], share: float = 0.5) -> list[dict[str, Any]]:
+    """The base part of every batch (a train unit's ``base`` parameter): each dataset at ``share`` of its weight."""
+    return [{"dataset": b.dataset, "hash": b.hash, "episodes": b.episodes, "weight": share * b.weight} for b in base]
 
 
 class _Builder:
@@ -136,7 +142,7 @@ class _Builder:
         self,
         tag: str,
         shift: str,
-        data: tuple[str, int],
+        data: tuple[str, int] | None,
         *,
         method: str,
         init: str | None,
@@ -145,17 +151,22 @@ class _Builder:
         monitor: Mapping[str, Any] | None = None,
         mixed: bool = True,
     ) -> str:
-        collect_unit, tier = data
-        deps = [collect_unit, *self.base_deps]
+        """A training run on the first K episodes of ``data`` (None: base data alone), 50/50 with base data if
+        ``mixed``."""
+        deps = [*self.base_deps]
+        target = None
+        if data is not None:
+            collect_unit, tier = data
+            deps.insert(0, collect_unit)
+            target = {
+                "collect": collect_unit,
+                "dataset": self.units[collect_unit].params["dataset"],
+                "tier": tier,
+                "weight": 0.5 if mixed else 1.0,
+            }
         if init is not None and init != BASE_POLICY:
             deps.append(f"train:{init}")
-        mix = base_mix(self.base) if mixed else []
-        target = {
-            "collect": collect_unit,
-            "dataset": self.units[collect_unit].params["dataset"],
-            "tier": tier,
-            "weight": 0.5 if mixed else 1.0,
-        }
+        mix = base_mix(self.base, 1.0 if target is None else 0.5) if mixed or target is None else []
         return self._add(
             Unit(
                 f"train:{tag}",
@@ -178,6 +189,7 @@ class _Builder:
         )
 
     def evaluate(self, policy: str, shift: str) -> str:
+        """An evaluation on the plan's reporting scenes."""
         e = self.plan.eval
         deps = () if policy == BASE_POLICY else (f"train:{policy}",)
         return self._add(
@@ -209,27 +221,38 @@ class _Builder:
         f = p.finetune
         top = f.tiers[-1]
         for shift in p.shifts:
-            for seed in f.seeds:
-                for k in f.tiers:
+            for k in f.tiers:
+                for seed in f.seeds_of(k):
                     tag = train_tag("ft", shift, k, f.steps, seed)
                     self.train(
                         tag, shift, self.target_data(shift, k), method="ft", init=BASE_POLICY, steps=f.steps, seed=seed
                     )
                     self.evaluate(tag, shift)
                     self.evaluate(tag, "base")
-                for method in f.baselines:
+                    if k == top and f.cross_shift:  # the top tier on the other shifts: what it forgets of them
+                        for other in p.shifts:
+                            self.evaluate(tag, other)
+            for seed in f.seeds:
+                for method in (m for m in f.baselines if m != "no_target"):
                     tag = train_tag(method, shift, top, f.steps, seed)
                     self.train(
                         tag,
                         shift,
                         self.target_data(shift, top),
-                        method=method,
+                        method="scratch" if method == "scratch_target" else method,
                         init=BASE_POLICY,
                         steps=f.steps,
                         seed=seed,
+                        mixed=method != "scratch_target",
                     )
                     self.evaluate(tag, shift)
                     self.evaluate(tag, "base")
+        if "no_target" in f.baselines:
+            for seed in f.seeds:
+                tag = no_target_tag(f.steps, seed)
+                self.train(tag, "base", None, method="ft", init=BASE_POLICY, steps=f.steps, seed=seed)
+                for shift in ["base", *p.shifts]:
+                    self.evaluate(tag, shift)
         if p.continual is not None:
             self._continual()
         if p.curves is not None:
@@ -264,11 +287,11 @@ class _Builder:
                 init=BASE_POLICY,
                 steps=es.steps,
                 seed=es.seed,
-                monitor={
+                monitor={  # its criteria choose a step: selection scenes
                     "every": es.every,
                     "episodes": es.eval_episodes,
                     "base_episodes": es.eval_episodes,
-                    "seed": p.eval.seed,
+                    "seed": p.eval.selection_seed,
                     "holdout": es.holdout,
                 },
             )
@@ -277,35 +300,36 @@ class _Builder:
     def _continual(self) -> None:
         s = self.plan.continual
         tasks = ["base", *s.sequence]
-        policy = BASE_POLICY
-        for i, shift in enumerate(s.sequence, 1):
-            data = self.target_data(shift, s.episodes, policy)
-            tag = train_tag("ft", shift, s.episodes, s.steps, s.seed, prefix=None if i == 1 else f"c{i}")
-            self.train(tag, shift, data, method="ft", init=policy, steps=s.steps, seed=s.seed)
-            for t in tasks:
-                self.evaluate(tag, t)
-            # single-step comparison: fine-tune the base on the base policy's episodes of this shift
-            single = train_tag("ft", shift, s.episodes, s.steps, s.seed)
-            self.train(
-                single,
-                shift,
-                self.target_data(shift, s.episodes),
-                method="ft",
-                init=BASE_POLICY,
-                steps=s.steps,
-                seed=s.seed,
-            )
-            self.evaluate(single, shift)
-            policy = tag
+        for seed in s.seeds:
+            policy = BASE_POLICY
+            for shift, tag in zip(s.sequence, continual_tags(self.plan, seed)):
+                data = self.target_data(shift, s.episodes, policy)
+                self.train(tag, shift, data, method="ft", init=policy, steps=s.steps, seed=seed)
+                for t in tasks:
+                    self.evaluate(tag, t)
+                # single-step comparison: fine-tune the base on the base policy's episodes of this shift
+                single = train_tag("ft", shift, s.episodes, s.steps, seed)
+                self.train(
+                    single,
+                    shift,
+                    self.target_data(shift, s.episodes),
+                    method="ft",
+                    init=BASE_POLICY,
+                    steps=s.steps,
+                    seed=seed,
+                )
+                self.evaluate(single, shift)
+                policy = tag
 
 
-def continual_tags(plan: Plan) -> list[str]:
-    """The train tag of every continual stage, in order."""
+def continual_tags(plan: Plan, seed: int | None = None) -> list[str]:
+    """The train tag of every continual stage of one seed's sequence (default: the first seed), in order."""
     s = plan.continual
     if s is None:
         return []
+    seed = s.seeds[0] if seed is None else seed
     return [
-        train_tag("ft", shift, s.episodes, s.steps, s.seed, prefix=None if i == 1 else f"c{i}")
+        train_tag("ft", shift, s.episodes, s.steps, seed, prefix=None if i == 1 else f"c{i}")
         for i, shift in enumerate(s.sequence, 1)
     ]
 

@@ -34,7 +34,8 @@ seed = 2000
 tiers = [4, 8]
 steps = 10
 seeds = [0]
-baselines = ["scratch"]
+baselines = ["scratch", "scratch_target", "no_target"]
+cross_shift = true
 
 [continual]
 sequence = ["harsh_lighting", "offset_gripper"]

@@ -44,7 +44,7 @@ def _outputs(home) -> list[str]:
             ("tiers = [4, 8]", "tiers = [4, 8, 16]"),
             "plan finetune.tiers has tier 16 above the collection size collect.episodes = 8",
         ),
-        (('baselines = ["scratch"]', 'baselines = ["scratch", "imagenet"]'), "unknown method 'imagenet'"),
+        (('baselines = ["scratch"', 'baselines = ["scratch", "imagenet"'), "unknown method 'imagenet'"),
         (('methods = ["ft"]', 'methods = ["ft", "pnn2"]'), "unknown method 'pnn2'"),
         (
             ('criteria = ["eval", "softopc", "auc", "td"]', 'criteria = ["eval", "opc"]'),
@@ -58,6 +58,14 @@ def _outputs(home) -> list[str]:
         (
             ("[eval]\nepisodes = 4", "[eval]\nepisodes = 4\nepisode = 5"),
             "plan [eval] has unknown setting(s) ['episode']",
+        ),
+        (
+            ("[eval]\nepisodes = 4\nseed = 2000", "[eval]\nepisodes = 4\nseed = 3000"),
+            "plan eval.seed and eval.selection_seed are both 3000: the same scenes would choose and report",
+        ),
+        (
+            ('baselines = ["scratch"', 'baselines = ["scratch", "no_targets"'),
+            "unknown method 'no_targets'; did you mean 'no_target'",
         ),
     ],
 )

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import copy
 import tomllib
 
 import pytest
 
+from nsl.study import reference as ref
 from nsl.study.plan import parse_plan
 from nsl.study.report import (
     Count,
@@ -15,6 +17,7 @@ from nsl.study.report import (
     early_stop_table,
     findings,
     render,
+    tiers_base_table,
     tiers_table,
 )
 
@@ -25,17 +28,17 @@ def c(successes: int, episodes: int = 100) -> dict:
     return {"successes": successes, "episodes": episodes}
 
 
-def _curve(points):
-    """Curve rows: (step, target successes, base successes, softopc, auc) out of 100 episodes each."""
+def _curve(points, episodes: int = 100):
+    """Curve rows: (step, target successes, base successes, softopc, auc) out of ``episodes`` episodes each."""
     rows = []
     for step, t, b, softopc, auc in points:
         rows.append(
             {
                 "step": step,
-                "target_success": t / 100,
-                "target_episodes": 100,
-                "base_success": b / 100,
-                "base_episodes": 100,
+                "target_success": t / episodes,
+                "target_episodes": episodes,
+                "base_success": b / episodes,
+                "base_episodes": episodes,
                 "softopc": softopc,
                 "auc": auc,
                 "td_error": None,
@@ -44,8 +47,14 @@ def _curve(points):
     return rows
 
 
+# The hand-made records below hold one baseline and no cross-shift evaluations.
+RECORDS_PLAN = MINI_PLAN.replace(
+    'baselines = ["scratch", "scratch_target", "no_target"]', 'baselines = ["scratch"]'
+).replace("cross_shift = true\n", "")
+
+
 def records(**changes) -> dict:
-    plan = parse_plan(tomllib.loads(MINI_PLAN), default_name="mini").to_dict()
+    plan = parse_plan(tomllib.loads(RECORDS_PLAN), default_name="mini").to_dict()
     rec = {
         "study": "mini",
         "plan": plan,
@@ -168,3 +177,109 @@ def test_a_calibrated_severity_keeps_the_study_figures_beside_ours():
     assert tiers[-1].startswith("|  | study | 43% |")  # the study's offset-gripper row under the calibrated shift
     (a,) = [x for x in findings(rec) if x.key == "a"]
     assert a.study.startswith("drops of harsh lighting 55; offset gripper 39 points")
+
+
+# The `full` plan's shifts, in its order (which is not the order of the reference tables).
+FULL_SHIFTS = (
+    "harsh_lighting@2",
+    "transparent_objects@0.8",
+    "checkerboard_backing@0.4",
+    "extend_gripper@2",
+    "offset_gripper@0.25",
+)
+
+
+def shift_records(shifts) -> dict:
+    """The hand-made records with the plan's shifts replaced (each shift gets harsh lighting's fine-tune row)."""
+    plan = tomllib.loads(MINI_PLAN)
+    plan["shifts"] = list(shifts)
+    row = records()["finetune"]["harsh_lighting"]
+    return records(
+        plan=parse_plan(plan, default_name="mini").to_dict(),
+        base_policy={"base": c(80), **{s: c(40) for s in shifts}},
+        finetune={s: copy.deepcopy(row) for s in shifts},
+    )
+
+
+@pytest.mark.parametrize("shifts", [FULL_SHIFTS, FULL_SHIFTS[::-1], ("offset_gripper", "checkerboard_backing@0.4")])
+def test_every_findings_study_column_walks_the_reference_in_the_plans_shift_order(shifts):
+    f = {x.key: x for x in findings(shift_records(shifts))}
+    names = [s.split("@")[0] for s in shifts]
+    pretty = [n.replace("_", " ") for n in names]
+    top = ref.TIERS[-1]
+    # (a) Table 5.1: 86% minus each challenge, and their range
+    drops = [ref.BASE_TASK - ref.CHALLENGE[n] for n in names]
+    listed = "; ".join(f"{p} {d}" for p, d in zip(pretty, drops, strict=True))
+    assert f["a"].study == f"drops of {listed} points ({min(drops)}-{max(drops)})"
+    # (b) Table 5.2: 800 attempts minus the base policy, then who reached the base task's 86%
+    gains = [ref.FINETUNE[n][top] - ref.FINETUNE[n]["base"] for n in names]
+    listed = "; ".join(f"{p} {g:+d}" for p, g in zip(pretty, gains, strict=True))
+    assert f["b"].study.startswith(f"gains at {top} attempts: {listed} points (mean {sum(gains) / len(gains):+.0f}")
+    reached = [p for p, n in zip(pretty, names, strict=True) if ref.FINETUNE[n][top] >= ref.BASE_TASK]
+    reached_text = f"{len(reached)} of {len(names)} reached its base-task {ref.BASE_TASK}% ({', '.join(reached)})"
+    assert reached_text in f["b"].study
+    # (c) Table 5.2: 800 attempts minus scratch (the mini plan's top tier is 8, so the study's tier is named)
+    over = ", ".join(f"{ref.FINETUNE[n][top] - ref.FINETUNE[n]['scratch']:+d}" for n in names)
+    assert f["c"].study == f"{over} points (at {top} attempts)"
+    # (d) Table 5.3's text; (e) Fig. 5.7, on the study's own shift
+    assert f["d"].study == ref.NO_FORGETTING
+    assert ref.EARLY_STOP in f["e"].study and f"{ref.EARLY_STOP_SHIFT.replace('_', ' ')}, 400 attempts" in f["e"].study
+
+
+def test_the_full_plans_study_columns_are_the_studys_figures_in_plan_order():
+    f = {x.key: x for x in findings(shift_records(FULL_SHIFTS))}
+    assert f["a"].study.endswith("extend gripper 10; offset gripper 39 points (10-55)")
+    assert "harsh lighting +31; transparent objects +17; checkerboard backing +40" in f["b"].study
+    assert "(mean +27); 2 of 5 reached its base-task 86% (checkerboard backing, offset gripper)" in f["b"].study
+    assert f["c"].study.startswith("+59, +39, +90, +69, +61 points")
+    # a plan with some of the shifts: the study's mean over these, and its own over the five
+    f = {x.key: x for x in findings(records())}
+    assert "harsh lighting +31; offset gripper +55 points (mean +43; +27 over its 5 shifts)" in f["b"].study
+
+
+def test_the_base_task_table_keeps_the_studys_base_task_fine_tune_apart():
+    table = tiers_base_table(records())
+    rows = [r for r in table.splitlines() if r.startswith("|")]
+    assert len(rows) == 2 + 2 and not any("study" in r for r in rows)
+    note = table.splitlines()[-1]
+    study = ref.FINETUNE["base"]
+    assert "a fine-tune on base-task data" in note and "not comparable to this table" in note
+    assert f"(base policy {study['base']}%, 25: {study[25]}%," in note and f"800: {study[800]}%" in note
+    assert note in render(records(), None, {})
+
+
+def test_early_stopping_says_when_the_scenes_cannot_resolve_a_difference():
+    # 50 scenes per point: best 62% at step 5; SoftOPC and AUC choose step 10 at 54%, 8 points below: noise
+    curve = [(0, 28, 44, 0.01, 0.5), (5, 31, 44, 0.02, 0.55), (10, 27, 40, 0.08, 0.70)]
+    (e,) = [x for x in findings(records(early_stop=_curve(curve, episodes=50))) if x.key == "e"]
+    assert e.holds is None and "(50 scenes per point)" in e.ours
+    assert "softopc: step 10, 54% [" in e.ours and "8 [-11, +26] points below: not resolvable at 50 scenes" in e.ours
+    assert e.ours.endswith("the differences cannot be resolved at 50 scenes per point")
+    # 100 scenes, 20 points below: resolvably more than 5 points below on every criterion -> fails
+    curve = [(0, 75, 80, 0.01, 0.5), (5, 90, 79, 0.02, 0.55), (10, 70, 70, 0.08, 0.70)]
+    (e,) = [x for x in findings(records(early_stop=_curve(curve))) if x.key == "e"]
+    assert e.holds is False and e.ours.count("20 [+9, +31] points below: more than 5 points below") == 2
+    # 2,000 scenes, 0.2 points below: resolvably within 5 points -> holds
+    curve = [(0, 1500, 1600, 0.01, 0.5), (5, 1800, 1600, 0.02, 0.55), (10, 1796, 1600, 0.08, 0.70)]
+    (e,) = [x for x in findings(records(early_stop=_curve(curve, episodes=2000))) if x.key == "e"]
+    assert e.holds is True and "points below: within 5 points" in e.ours and "(2000 scenes per point)" in e.ours
+
+
+def test_seed_means_come_with_a_t_interval_and_the_cross_shift_table_finds_forgetting():
+    from nsl.study.report import cross_shift_table, seed_mean, seeds_cell
+
+    # three seeds of 100 scenes: 60, 70, 80% -> mean 70, t(2) 4.303 * 10 / sqrt(3) = 24.8 points
+    mean, half = seed_mean([c(60), c(70), c(80)])
+    assert mean == pytest.approx(0.70) and half == pytest.approx(4.3027 * 0.10 / 3**0.5, rel=1e-3)
+    assert seeds_cell([c(60), c(70), c(80)]).startswith("70% ±25 (pooled [")
+    assert seeds_cell([c(70)]) == "70% [60-78]" and seeds_cell([c(70), None]) == "-"
+    rec = records()
+    rec["plan"]["finetune"]["cross_shift"] = True
+    rec["finetune"]["harsh_lighting"]["cross_shift"] = {"harsh_lighting": [c(70)], "offset_gripper": [c(45)]}
+    rec["finetune"]["offset_gripper"]["cross_shift"] = {"harsh_lighting": [c(10)], "offset_gripper": [c(85)]}
+    rows = cross_shift_table(rec).splitlines()
+    assert rows[2].startswith("| base policy | 20% [") and rows[3].startswith("| harsh lighting | 70% [")
+    assert "45% [" in rows[3] and "(-30 [" in rows[3]  # offset gripper: 75% -> 45%
+    f = {x.key: x for x in findings(rec)}["f"]
+    # off the diagonal: harsh -> offset -30, offset -> harsh -10: mean -20
+    assert f.holds is True and f.ours.startswith("-20.0 points on average over 2")

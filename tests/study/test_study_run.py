@@ -58,7 +58,7 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
         ("offset gripper", "ours"),
         ("", "study"),
     ]
-    assert all(len(r) == 6 for r in tiers)
+    assert all(len(r) == 8 for r in tiers)  # + scratch_target and no_target
     # the tier cells are the fine-tuned checkpoints' catalogued evaluations
     with Catalog() as cat:
         ft = cat.resolve_checkpoint("ckpt:mini-ft-harsh-lighting-n8-k10-s0@latest")
@@ -103,7 +103,19 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
     assert es[-1][1] != "no choice" and any(ch.isdigit() for ch in es[-1][1]), es
     # findings (a)-(e), each with a verdict, in the report and recomputed from the records
     verdicts = {f.key: f.verdict for f in findings(records)}
-    assert set(verdicts) == set("abcde")
+    assert set(verdicts) == set("abcdef")
+    # the baselines that separate the causes ran as the plan defines them
+    with Catalog() as cat:
+        alone = cat.resolve_checkpoint("ckpt:mini-scratch_target-harsh-lighting-n8-k10-s0@latest")
+        none = cat.resolve_checkpoint("ckpt:mini-no_target-k10-s0@latest")
+    assert [d.dataset for d in alone.data] == ["mini-harsh-lighting-by-base"]
+    assert load_checkpoint(alone.path).config["method"] == "scratch"  # the base gives only its architecture
+    assert [d.dataset for d in none.data] == ["mini-base-oracle"] and none.parent == base_id
+    assert tiers[0][7] != "-" and tiers[2][7] != "-"  # no_target on each shift
+    # every top-tier fine-tune on every shift, against the base policy there
+    cross = _table(text, "The top tier's fine-tunes on every shift")
+    assert [r[0] for r in cross] == ["base policy", "harsh lighting", "offset gripper"]
+    assert all("[" in cell for r in cross for cell in r[1:])
     for f in _table(text, "## Findings"):
         assert f[1].strip("*") in ("holds", "fails", "not measured")
     # status lists every unit as done, with time spent

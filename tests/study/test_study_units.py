@@ -49,7 +49,7 @@ def test_names_are_derived_from_the_plan_and_experiments_share_units():
     tiers = {
         u.params["target"]["tier"]
         for u in units.values()
-        if u.kind == "train" and u.params["target"]["collect"] == "collect:harsh_lighting:base"
+        if u.kind == "train" and (u.params["target"] or {}).get("collect") == "collect:harsh_lighting:base"
     }
     assert tiers == {4, 8}
     # stage 2 fine-tunes stage 1 on data stage 1 collected
@@ -76,3 +76,61 @@ def test_topological_order_puts_every_dependency_first():
     assert sorted(names) == sorted(units)
     pos = {n: i for i, n in enumerate(names)}
     assert all(pos[d] < pos[n] for n in names for d in units[n].deps)
+
+
+def test_baselines_that_separate_the_causes_cross_shift_evaluations_and_seeds():
+    text = MINI_PLAN.replace("seeds = [0]\nbaselines", "seeds = [0, 1]\ntier_seeds = [0]\nbaselines").replace(
+        "episodes = 8\nsteps = 10\n\n[curves]", "episodes = 8\nsteps = 10\nseed = 3\n\n[curves]"
+    )
+    plan, units = _units(text)
+    trains = {n for n in units if n.startswith("train:ft-harsh-lighting-n")}
+    # the top tier has both seeds, the lower tier only tier_seeds; the continual seed 3 adds its own single step
+    assert trains == {
+        "train:ft-harsh-lighting-n4-k10-s0",
+        "train:ft-harsh-lighting-n8-k10-s0",
+        "train:ft-harsh-lighting-n8-k10-s1",
+        "train:ft-harsh-lighting-n8-k10-s3",
+    }
+    # scratch: random initialisation, the same 50/50 mix; scratch_target: random initialisation, target data alone
+    scratch, alone = (
+        units["train:scratch-harsh-lighting-n8-k10-s1"],
+        units["train:scratch_target-harsh-lighting-n8-k10-s1"],
+    )
+    assert scratch.params["method"] == alone.params["method"] == "scratch"
+    assert scratch.params["target"]["weight"] == 0.5 and sum(b["weight"] for b in scratch.params["base"]) == 0.5
+    assert alone.params["target"]["weight"] == 1.0 and alone.params["base"] == []
+    # no_target: the base fine-tuned with the recipe on base data alone, once per seed, evaluated everywhere
+    for seed in (0, 1):
+        none = units[f"train:no_target-k10-s{seed}"]
+        assert none.params["method"] == "ft" and none.params["init"] == "base" and none.params["target"] is None
+        assert sum(b["weight"] for b in none.params["base"]) == 1.0
+        assert not any(d.startswith("collect:") for d in none.deps)
+        for task in ("base", "harsh_lighting", "offset_gripper"):
+            assert f"eval:no_target-k10-s{seed}:{task}" in units
+    # the top tier's fine-tunes on the other shift (forgetting of shifts); the lower tier only on its own
+    assert "eval:ft-harsh-lighting-n8-k10-s1:offset_gripper" in units
+    assert "eval:ft-harsh-lighting-n4-k10-s0:offset_gripper" not in units
+    # the early-stopping criteria choose on selection scenes; every table reports on the reporting scenes
+    es = next(u for n, u in units.items() if n.startswith("train:es-"))
+    assert es.params["monitor"]["seed"] == plan.eval.selection_seed != plan.eval.seed
+    assert {u.params["seed"] for u in units.values() if u.kind == "eval"} == {plan.eval.seed}
+    # a legacy `seed = 3` under [continual] is seeds = [3]: the sequence's tags carry it
+    assert plan.continual.seeds == (3,) and "train:c2-offset-gripper-n8-k10-s3" in units
+    unit_graph(units)  # still a DAG
+
+
+def test_a_plan_saved_before_settings_were_added_is_still_the_same_plan():
+    import json
+
+    from nsl.study.driver import _same_plan
+
+    plan, _ = _units()
+    saved = json.loads(json.dumps(plan.to_dict()))  # as plan.json holds it
+    for key in ("selection_seed",):
+        saved["eval"].pop(key)
+    for key in ("tier_seeds",):
+        saved["finetune"].pop(key)
+    saved["continual"]["seed"] = saved["continual"].pop("seeds")[0]  # the older form
+    assert _same_plan(saved, plan)
+    saved["finetune"]["steps"] = 11
+    assert not _same_plan(saved, plan)
