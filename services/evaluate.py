@@ -82,7 +82,7 @@ def evaluate(
             for ref, make in factories.items()
         }
     table = {ref: {s: success_rate_from_outcomes(s, out) for s, out in res.items()} for ref, res in outcomes.items()}
-    stored = _store(table, config, source, precision)
+    stored = _store(table, config, source, precision, outcomes)
     paired = {}
     if len(refs) == 2:
         a, b = refs
@@ -90,7 +90,7 @@ def evaluate(
     return EvaluationResult(config, outcomes, table, paired, stored, precision)
 
 
-def _store(table, config, source: str | None, precision: str) -> dict[str, str]:
+def _store(table, config, source: str | None, precision: str, outcomes: dict) -> dict[str, str]:
     """Record checkpoint evaluations in the catalog; returns ``{ref: checkpoint id}``."""
     refs = [r for r in table if r.startswith("ckpt:") or r == "base"]
     if not refs:
@@ -120,7 +120,8 @@ def _store(table, config, source: str | None, precision: str) -> dict[str, str]:
                     seed=config.seed,
                     split=config.split,
                     ci=r.ci,
-                    extra=extra,
+                    # episode i's success on scene (seed, i), so that two evaluations on the same scenes pair up
+                    extra={**extra, "outcomes": "".join("1" if o else "0" for o in outcomes[ref][shift])},
                 )
             cat.write_model_card(entry.id)
     return stored

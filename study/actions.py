@@ -284,6 +284,7 @@ def _train(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
         base_episodes=m.get("base_episodes", 0),
         eval_scenes=m.get("seed", 0),
         workers=workers,
+        precision=p.get("precision", "fp32"),
         **({"holdout": m["holdout"]} if m.get("holdout") else {}),
     )
     result = train(

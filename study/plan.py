@@ -142,6 +142,8 @@ class Plan:
         "offset_gripper",
     )  # the challenge shifts (Tables 5.1 and 5.2)
     checkpoint_every: int = 500  # a killed training resumes from its last checkpoint
+    precision: str = "fp32"  # training units' arithmetic: fp32, bf16 (CPU bfloat16 autocast) or auto (bf16 if the CPU
+    # has it); evaluations and collections act in fp32, which is faster for CEM's one-state searches on the CPU
     base_data: BaseData = field(default_factory=BaseData)
     collect: Collect = field(default_factory=Collect)
     eval: Eval = field(default_factory=Eval)
@@ -301,6 +303,10 @@ def validate(plan: Plan) -> None:
     if len(set(names)) != len(names):
         raise ConfigError(f"plan shifts {list(plan.shifts)} repeat a shift")
     _positive(plan.checkpoint_every, "checkpoint_every")
+    from nsl.services.options import PRECISIONS
+
+    if plan.precision not in PRECISIONS:
+        raise ConfigError(f"plan precision = {plan.precision!r} is unknown; use one of {', '.join(PRECISIONS)}")
     bd = plan.base_data
     if bd.source not in BASE_DATA_SOURCES:
         raise ConfigError(f"plan base_data.source = {bd.source!r}; use 'checkpoint' (the base's own data) or 'plan'")

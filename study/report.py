@@ -6,9 +6,12 @@ numbers.  Everything else is a pure function of those records (and so can be
 tested on hand-made ones): the tables, the plots and :func:`findings`.
 
 Intervals: a success rate gets its 95% Wilson interval; a difference of two
-rates gets Newcombe's hybrid score interval (built from the two Wilson
-intervals; it treats the rates as independent, which is conservative for our
-paired scenes); a cell with several training seeds pools their episodes.
+rates gets Newcombe's score interval for paired outcomes when both cells
+recorded their episodes' outcomes on the same scenes (the catalog keeps them;
+a cell pooled over k training seeds is paired with the other cell's scenes
+repeated k times), and Newcombe's hybrid interval for independent rates
+otherwise (conservative for paired scenes).  A cell with several training
+seeds shows the seed mean with its t interval and pools their episodes.
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ OFFLINE_CRITERIA = ("softopc", "auc", "td")
 class Count:
     successes: int
     episodes: int
+    outcomes: str | None = None  # "1"/"0" per episode in scene order, when the evaluation recorded them
 
     @property
     def rate(self) -> float:
@@ -59,19 +63,33 @@ class Count:
         return f"{100 * self.rate:.0f}% [{100 * lo:.0f}-{100 * hi:.0f}]"
 
     def to_dict(self) -> dict:
-        return {"successes": self.successes, "episodes": self.episodes}
+        out: dict[str, Any] = {"successes": self.successes, "episodes": self.episodes}
+        return out if self.outcomes is None else {**out, "outcomes": self.outcomes}
 
 
 def count(d: Mapping | None) -> Count | None:
-    return None if not d else Count(int(d["successes"]), int(d["episodes"]))
+    return None if not d else Count(int(d["successes"]), int(d["episodes"]), d.get("outcomes"))
 
 
 def pooled(items: Sequence[Mapping | None]) -> Count | None:
-    """Several seeds' counts as one (None if any is missing)."""
+    """Several seeds' counts as one (None if any is missing); outcomes concatenated when every seed has them."""
     cs = [count(d) for d in items]
     if not cs or any(c is None for c in cs):
         return None
-    return Count(sum(c.successes for c in cs), sum(c.episodes for c in cs))
+    outcomes = None if any(c.outcomes is None for c in cs) else "".join(c.outcomes for c in cs)
+    return Count(sum(c.successes for c in cs), sum(c.episodes for c in cs), outcomes)
+
+
+def _paired(a: Count, b: Count) -> tuple[str, str] | None:
+    """The two cells' outcomes aligned scene by scene, or None when they cannot be paired."""
+    if a.outcomes is None or b.outcomes is None:
+        return None
+    x, y = a.outcomes, b.outcomes
+    if len(x) % len(y) == 0:
+        y = y * (len(x) // len(y))  # a pooled cell's seeds each met the other cell's scenes
+    elif len(y) % len(x) == 0:
+        x = x * (len(y) // len(x))
+    return (x, y) if len(x) == len(y) else None
 
 
 def seed_mean(items: Sequence[Mapping | None]) -> tuple[float, float] | None:
@@ -100,7 +118,17 @@ def seeds_cell(items: Sequence[Mapping | None]) -> str:
 
 
 def diff_interval(a: Count, b: Count) -> tuple[float, float, float]:
-    """(a - b, low, high): Newcombe's hybrid score interval (method 10) for a difference of proportions."""
+    """(a - b, low, high): Newcombe's interval for paired outcomes when both cells have them on the same
+    scenes, else his hybrid score interval (method 10) for independent proportions."""
+    pair = _paired(a, b)
+    if pair is not None:
+        from nsl.eval.paired import paired_difference_interval
+
+        x, y = pair
+        both = sum(1 for i, j in zip(x, y) if i == j == "1")
+        only_a, only_b = sum(1 for i, j in zip(x, y) if i > j), sum(1 for i, j in zip(x, y) if i < j)
+        lo, hi = paired_difference_interval(both, only_a, only_b, len(x) - both - only_a - only_b)
+        return a.rate - b.rate, lo, hi
     (l1, u1), (l2, u2) = a.ci, b.ci
     d = a.rate - b.rate
     return (
@@ -130,7 +158,10 @@ def gather(plan: Plan, study: str, evaluation, read_curve_file) -> dict[str, Any
     def ev(policy: str, shift: str) -> dict | None:
         r = plan.base if policy == BASE_POLICY else f"ckpt:{study}-{policy}@latest"
         entry = evaluation(r, shift, e.episodes, e.seed)
-        return None if entry is None else {"successes": entry.successes, "episodes": entry.episodes}
+        if entry is None:
+            return None
+        out = {"successes": entry.successes, "episodes": entry.episodes}
+        return {**out, "outcomes": entry.extra["outcomes"]} if entry.extra.get("outcomes") else out
 
     out: dict[str, Any] = {"study": study, "plan": plan.to_dict()}
     shifts = list(plan.shifts)

@@ -183,6 +183,8 @@ class _Builder:
                     "target": target,
                     "checkpoint_every": self.plan.checkpoint_every,
                     "monitor": None if monitor is None else dict(monitor),
+                    # fp32 is left out, so the units of plans made before the setting keep their parameters
+                    **({} if self.plan.precision == "fp32" else {"precision": self.plan.precision}),
                 },
                 tuple(deps),
             )

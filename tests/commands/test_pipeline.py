@@ -134,8 +134,11 @@ def test_checkpoint_policy_collects_and_evaluations_are_stored(pipeline, capsys)
     assert set(out["results"]) == {"base", "harsh_lighting"}
     with Catalog() as cat:
         entry = cat.resolve_checkpoint("ckpt:base-tiny@latest")
-        shifts = {e.shift for e in cat.evaluations(entry.id)}
-    assert {"base", "harsh_lighting"} <= shifts
+        evals = {e.shift: e for e in cat.evaluations(entry.id) if e.episodes == 4}
+    assert {"base", "harsh_lighting"} <= set(evals)
+    # each episode's outcome on its scene is kept, so that evaluations on the same scenes can be paired
+    for e in evals.values():
+        assert len(e.extra["outcomes"]) == 4 and e.extra["outcomes"].count("1") == e.successes
 
 
 def test_action_noise_is_recorded_with_the_data_and_refused_for_scripted_policies(pipeline):

@@ -283,3 +283,22 @@ def test_seed_means_come_with_a_t_interval_and_the_cross_shift_table_finds_forge
     f = {x.key: x for x in findings(rec)}["f"]
     # off the diagonal: harsh -> offset -30, offset -> harsh -10: mean -20
     assert f.holds is True and f.ours.startswith("-20.0 points on average over 2")
+
+
+def test_cells_with_outcomes_on_the_same_scenes_get_the_paired_interval():
+    from nsl.study.report import Count, diff_interval, pooled
+
+    # 100 scenes: the fine-tune succeeds wherever the base does, and on 20 more
+    base = Count(50, 100, "1" * 50 + "0" * 50)
+    tuned = Count(70, 100, "1" * 70 + "0" * 30)
+    d, lo, hi = diff_interval(tuned, base)
+    _, lo_ind, hi_ind = diff_interval(Count(70, 100), Count(50, 100))
+    assert d == pytest.approx(0.20) and lo_ind < lo < 0.20 < hi < hi_ind  # pairing narrows the interval
+    # three seeds pooled against one evaluation of the same scenes: the base's scenes repeat per seed
+    seeds = pooled([tuned.to_dict()] * 3)
+    assert seeds is not None and len(seeds.outcomes) == 300
+    d3, lo3, hi3 = diff_interval(seeds, base)
+    assert d3 == pytest.approx(0.20) and lo3 > lo
+    # one cell without outcomes, or scenes that do not line up: the independent interval
+    assert diff_interval(Count(70, 100), base)[1:] == (lo_ind, hi_ind)
+    assert diff_interval(Count(70, 100, "1" * 70 + "0" * 30), Count(50, 80, "1" * 50 + "0" * 30))[1] < lo

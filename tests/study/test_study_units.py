@@ -134,3 +134,17 @@ def test_a_plan_saved_before_settings_were_added_is_still_the_same_plan():
     assert _same_plan(saved, plan)
     saved["finetune"]["steps"] = 11
     assert not _same_plan(saved, plan)
+
+
+def test_the_plans_precision_reaches_every_training_unit_and_fp32_leaves_the_units_as_they_were():
+    import pytest
+
+    from nsl.errors import ConfigError
+
+    _, fp32 = _units()
+    assert all("precision" not in u.params for u in fp32.values())
+    _, auto = _units('precision = "auto"\n' + MINI_PLAN)
+    assert {u.params["precision"] for u in auto.values() if u.kind == "train"} == {"auto"}
+    assert all("precision" not in u.params for u in auto.values() if u.kind != "train")  # acting stays fp32
+    with pytest.raises(ConfigError, match="plan precision = 'fp16' is unknown; use one of fp32, bf16, auto"):
+        _units('precision = "fp16"\n' + MINI_PLAN)
