@@ -148,3 +148,19 @@ def test_the_plans_precision_reaches_every_training_unit_and_fp32_leaves_the_uni
     assert all("precision" not in u.params for u in auto.values() if u.kind != "train")  # acting stays fp32
     with pytest.raises(ConfigError, match="plan precision = 'fp16' is unknown; use one of fp32, bf16, auto"):
         _units('precision = "fp16"\n' + MINI_PLAN)
+
+
+def test_the_estimate_counts_a_bf16_training_unit_at_the_measured_speed_up(monkeypatch):
+    import pytest
+
+    from nsl.learners import precision
+    from nsl.study.estimate import BF16_STEP_SPEEDUP, unit_seconds
+
+    _, fp32 = _units()
+    _, auto = _units('precision = "auto"\n' + MINI_PLAN)
+    name = "train:ft-harsh-lighting-n8-k10-s0"
+    monkeypatch.setattr(precision, "bf16_supported", lambda: True)
+    work = unit_seconds(fp32[name]) - 1.5  # the overhead of a unit
+    assert unit_seconds(auto[name]) - 1.5 == pytest.approx(work / BF16_STEP_SPEEDUP)
+    monkeypatch.setattr(precision, "bf16_supported", lambda: False)  # auto falls back to fp32
+    assert unit_seconds(auto[name]) == unit_seconds(fp32[name])
