@@ -151,6 +151,7 @@ class EvaluationEntry:
     ci_high: float
     seed: int
     created: str
+    precision: str = "fp32"  # the arithmetic the policy acted in
     extra: dict[str, Any] = field(default_factory=dict, repr=False)
 
     @property

@@ -145,7 +145,39 @@ def _v3(conn: sqlite3.Connection) -> None:
     )
 
 
-MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _v1, 2: _v2, 3: _v3}
+def _v4(conn: sqlite3.Connection) -> None:
+    """Evaluations keep the precision the policy acted in: the same scenes in fp32 and in bf16 are two records."""
+    _run_script(
+        conn,
+        """
+        CREATE TABLE evaluations_v4 (
+            id         INTEGER PRIMARY KEY AUTOINCREMENT,
+            checkpoint TEXT NOT NULL,
+            shift      TEXT NOT NULL,
+            split      TEXT NOT NULL,
+            episodes   INTEGER NOT NULL,
+            successes  INTEGER NOT NULL,
+            ci_low     REAL NOT NULL,
+            ci_high    REAL NOT NULL,
+            seed       INTEGER NOT NULL,
+            extra      TEXT NOT NULL,
+            created    TEXT NOT NULL,
+            precision  TEXT NOT NULL DEFAULT 'fp32',  -- the network's arithmetic while acting: fp32 or bf16
+            UNIQUE (checkpoint, shift, split, seed, episodes, precision)
+        );
+        INSERT INTO evaluations_v4 (id, checkpoint, shift, split, episodes, successes, ci_low, ci_high, seed, extra,
+                                    created, precision)
+            SELECT id, checkpoint, shift, split, episodes, successes, ci_low, ci_high, seed, extra, created,
+                   COALESCE(json_extract(extra, '$.precision'), 'fp32')
+            FROM evaluations ORDER BY id;
+        DROP TABLE evaluations;
+        ALTER TABLE evaluations_v4 RENAME TO evaluations;
+        CREATE INDEX evaluations_checkpoint ON evaluations (checkpoint, shift)
+    """,
+    )
+
+
+MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _v1, 2: _v2, 3: _v3, 4: _v4}
 SCHEMA_VERSION = max(MIGRATIONS)
 
 

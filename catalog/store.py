@@ -544,13 +544,15 @@ class Catalog:
         split: str = "test",
         ci: tuple[float, float] | None = None,
         extra: Mapping[str, Any] | None = None,
+        precision: str = "fp32",
     ) -> EvaluationEntry:
         """Record ``successes`` out of ``episodes`` for a checkpoint on ``shift`` (a shift spec name).
 
         ``ci`` is the 95% interval (default: Wilson); ``extra`` any JSON
-        detail (eval config, env version, code version).  Re-recording the
-        same (checkpoint, shift, split, seed, episodes) with the same result
-        is a no-op; with a different result it is refused.
+        detail (eval config, env version, code version); ``precision`` the
+        arithmetic the policy acted in.  Re-recording the same (checkpoint,
+        shift, split, seed, episodes, precision) with the same result is a
+        no-op; with a different result it is refused.
         """
         entry = self.checkpoint(checkpoint)
         if not isinstance(shift, str) or not shift:
@@ -562,17 +564,19 @@ class Catalog:
         lo, hi = ci if ci is not None else wilson_interval(successes, episodes)
         if not 0.0 <= lo <= hi <= 1.0:
             raise ConfigError(f"evaluation interval {ci!r} must satisfy 0 <= low <= high <= 1")
-        key = (entry.id, shift, split, int(seed), episodes)
+        if precision not in ("fp32", "bf16"):
+            raise ConfigError(f"evaluation precision {precision!r} must be fp32 or bf16 (the precision that acted)")
+        key = (entry.id, shift, split, int(seed), episodes, precision)
         with self.write() as c:
             old = c.execute(
                 "SELECT * FROM evaluations WHERE checkpoint = ? AND shift = ? AND split = ? AND seed = ? "
-                "AND episodes = ?",
+                "AND episodes = ? AND precision = ?",
                 key,
             ).fetchone()
             if old is None:
                 cur = c.execute(
                     "INSERT INTO evaluations (checkpoint, shift, split, episodes, successes, ci_low, "
-                    "ci_high, seed, extra, created) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    "ci_high, seed, extra, created, precision) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                     (
                         entry.id,
                         shift,
@@ -584,6 +588,7 @@ class Catalog:
                         int(seed),
                         dumps(dict(extra or {})),
                         schema.utc_now(),
+                        precision,
                     ),
                 )
                 new_id = cur.lastrowid
@@ -592,7 +597,8 @@ class Catalog:
             if e.successes != successes:
                 raise ConfigError(
                     f"an evaluation of ckpt:{entry.ref} on {shift} ({split} objects, seed {seed}, {episodes} "
-                    f"episodes) is already recorded with {e.successes} successes; evaluate with another --seed"
+                    f"episodes, {precision}) is already recorded with {e.successes} successes; "
+                    "evaluate with another --seed"
                 )
             return e
         return self._evaluation_row(self.conn.execute("SELECT * FROM evaluations WHERE id = ?", (new_id,)).fetchone())
@@ -609,8 +615,10 @@ class Catalog:
 
     @staticmethod
     def _evaluation_row(r: tuple) -> EvaluationEntry:
-        eid, ckpt, shift, split, episodes, successes, lo, hi, seed, extra, created = r
-        return EvaluationEntry(eid, ckpt, shift, split, episodes, successes, lo, hi, seed, created, json.loads(extra))
+        eid, ckpt, shift, split, episodes, successes, lo, hi, seed, extra, created, precision = r
+        return EvaluationEntry(
+            eid, ckpt, shift, split, episodes, successes, lo, hi, seed, created, precision, json.loads(extra)
+        )
 
     # ----------------------------------------------------------------- tags
     def tag(self, tag: str, checkpoint: str) -> CheckpointEntry:

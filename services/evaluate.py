@@ -122,6 +122,7 @@ def _store(table, config, source: str | None, precision: str, outcomes: dict) ->
                     ci=r.ci,
                     # episode i's success on scene (seed, i), so that two evaluations on the same scenes pair up
                     extra={**extra, "outcomes": "".join("1" if o else "0" for o in outcomes[ref][shift])},
+                    precision=precision,
                 )
             cat.write_model_card(entry.id)
     return stored

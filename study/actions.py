@@ -192,7 +192,7 @@ def evaluation(ref: str, shift: str, episodes: int, seed: int):
         except UnknownReferenceError:
             return None
         for e in cat.evaluations(entry.id, shift):
-            if e.split == "test" and e.seed == seed and e.episodes == episodes:
+            if e.split == "test" and e.seed == seed and e.episodes == episodes and e.precision == "fp32":
                 return e
     return None
 

@@ -8,7 +8,8 @@ Measures, in the workspace ``$NSL_HOME``:
 * the shipped base itself acting in fp32 and in bf16 on the base task and both shifts, 1,000 selection scenes.
 
 Prints a Markdown table: each precision's mean success over seeds, and the difference (bf16 - fp32) with a 95%
-interval from the pooled episodes (3,000 against 3,000; the seeds' spread is printed beside it).  Every step
+interval paired on the scenes (seed s in bf16 against seed s in fp32, 3,000 pairs; Newcombe's paired interval, the
+seeds' spread printed beside it); and the base acting in each precision, paired on its 1,000 scenes.  Every step
 resumes: collections and training runs continue where they stopped.
 
     NSL_HOME=<a workspace with the scripted base data> python scripts/experiments/precision_equivalence.py
@@ -19,13 +20,15 @@ The scripted base data is what ``scripts/collect_base_data.sh`` collects (``make
 from __future__ import annotations
 
 import argparse
-import math
 import statistics
 import time
 
 import nsl
+from nsl.eval import compare_paired
 
 SHIFTS = ("harsh_lighting@2", "offset_gripper@0.25")
+# bf16 runs update with fused Adam (learners/qtopt.py); runs named "bf16" in older workspaces used the per-tensor loop
+RUN_NAME = {"fp32": "fp32", "bf16": "bf16-fused"}
 BASE_MIX = ("grasp-base-oracle=0.27", "grasp-base-noisy=0.115", "grasp-base-random=0.115")
 
 
@@ -33,11 +36,10 @@ def slug(shift: str) -> str:
     return shift.replace("@", "-").replace("_", "-").replace(".", "")
 
 
-def interval(p1: float, n1: int, p2: float, n2: int) -> tuple[float, float]:
-    """95% Wald interval of p1 - p2 for independent samples (points)."""
-    se = math.sqrt(p1 * (1 - p1) / n1 + p2 * (1 - p2) / n2)
-    d = p1 - p2
-    return 100 * (d - 1.96 * se), 100 * (d + 1.96 * se)
+def paired(bf16: list[bool], fp32: list[bool]) -> str:
+    """bf16 - fp32 in points with its 95% paired interval, from outcomes on the same scenes."""
+    c = compare_paired(bf16, fp32, "bf16", "fp32")
+    return f"{100 * (c.success_a - c.success_b):+.1f} [{100 * c.ci_low:+.1f}, {100 * c.ci_high:+.1f}]"
 
 
 def main() -> None:
@@ -62,6 +64,7 @@ def main() -> None:
             progress=False,
         )
         rates: dict[str, list[tuple[int, int]]] = {}
+        outcomes: dict[str, list[bool]] = {}  # each precision's episodes, seed after seed, scene by scene
         for precision in ("fp32", "bf16"):
             for seed in seeds:
                 started = time.perf_counter()
@@ -70,7 +73,7 @@ def main() -> None:
                     init="ckpt:base",
                     seed=seed,
                     precision=precision,
-                    name=f"prec-{slug(shift)}-{precision}-s{seed}",
+                    name=f"prec-{slug(shift)}-{RUN_NAME[precision]}-s{seed}",
                     progress=False,
                 )
                 result = nsl.evaluate(
@@ -84,8 +87,9 @@ def main() -> None:
                 )
                 r = result.table[run.checkpoint][shift]
                 rates.setdefault(precision, []).append((r.successes, r.episodes))
+                outcomes.setdefault(precision, []).extend(result.outcomes[run.checkpoint][shift])
                 print(f"{shift} {precision} seed {seed}: {r} ({time.perf_counter() - started:.0f} s)", flush=True)
-        rows.append((shift, rates))
+        rows.append((shift, rates, outcomes))
     base = nsl.evaluate(
         "ckpt:base",
         shift="base," + ",".join(SHIFTS),
@@ -105,27 +109,24 @@ def main() -> None:
     )
     print("\n| shift | fp32 fine-tunes (seeds) | bf16 fine-tunes (seeds) | bf16 - fp32 [95%] |")
     print("|---|---|---|---|")
-    for shift, rates in rows:
+    for shift, rates, outcomes in rows:
         cells = {}
         for precision, rs in rates.items():
             per = [100 * s / n for s, n in rs]
             cells[precision] = (sum(s for s, _ in rs) / sum(n for _, n in rs), sum(n for _, n in rs), per)
-        (p32, n32, s32), (p16, n16, s16) = cells["fp32"], cells["bf16"]
-        lo, hi = interval(p16, n16, p32, n32)
+        (p32, _, s32), (p16, _, s16) = cells["fp32"], cells["bf16"]
         spread = lambda xs: " / ".join(f"{x:.1f}" for x in xs)  # noqa: E731
         print(
             f"| {shift} | {100 * p32:.1f}% ({spread(s32)}; sd {statistics.pstdev(s32):.1f}) | "
             f"{100 * p16:.1f}% ({spread(s16)}; sd {statistics.pstdev(s16):.1f}) | "
-            f"{100 * (p16 - p32):+.1f} [{lo:+.1f}, {hi:+.1f}] |"
+            f"{paired(outcomes['bf16'], outcomes['fp32'])} |"
         )
     print("\n| the shipped base on | acting in fp32 | acting in bf16 | bf16 - fp32 [95%] |")
     print("|---|---|---|---|")
     for shift, r32 in base.table["ckpt:base"].items():
         r16 = base16.table["ckpt:base"][shift]
-        lo, hi = interval(r16.success_rate, r16.episodes, r32.success_rate, r32.episodes)
-        print(
-            f"| {shift} | {r32} | {r16} | {100 * (r16.success_rate - r32.success_rate):+.1f} [{lo:+.1f}, {hi:+.1f}] |"
-        )
+        diff = paired(base16.outcomes["ckpt:base"][shift], base.outcomes["ckpt:base"][shift])
+        print(f"| {shift} | {r32} | {r16} | {diff} |")
 
 
 if __name__ == "__main__":

@@ -87,3 +87,36 @@ def test_empty_file_becomes_a_catalog():
     path.write_bytes(b"")
     with Catalog() as cat:
         assert cat.datasets() == []
+
+
+def test_a_version_3_catalog_keeps_its_evaluations_and_then_holds_both_precisions_on_the_same_scenes(tmp_path):
+    from catalog_factories import make_checkpoint
+
+    from nsl.catalog.schema import _v4
+
+    with Catalog() as cat:
+        ckpt = make_checkpoint(cat, tmp_path, "ft", 10, 0.5)
+    # the evaluations table as version 3 wrote it (no precision column), with one record, then migration 4
+    old = sqlite3.connect(workspace.catalog_path())
+    old.execute("DROP TABLE evaluations")
+    old.execute(
+        "CREATE TABLE evaluations (id INTEGER PRIMARY KEY AUTOINCREMENT, checkpoint TEXT NOT NULL, shift TEXT NOT "
+        "NULL, split TEXT NOT NULL, episodes INTEGER NOT NULL, successes INTEGER NOT NULL, ci_low REAL NOT NULL, "
+        "ci_high REAL NOT NULL, seed INTEGER NOT NULL, extra TEXT NOT NULL, created TEXT NOT NULL, "
+        "UNIQUE (checkpoint, shift, split, seed, episodes))"
+    )
+    old.execute(
+        "INSERT INTO evaluations (checkpoint, shift, split, episodes, successes, ci_low, ci_high, seed, extra, "
+        "created) VALUES (?, 'base', 'test', 100, 80, 0.7, 0.9, 3000, '{}', '2026-01-01T00:00:00Z')",
+        (ckpt.id,),
+    )
+    _v4(old)
+    old.commit()
+    old.close()
+    with Catalog() as cat:
+        (e,) = cat.evaluations(ckpt.id)
+        assert (e.successes, e.seed, e.precision) == (80, 3000, "fp32")
+        bf16 = cat.add_evaluation(ckpt.id, "base", episodes=100, successes=78, seed=3000, precision="bf16")
+        assert bf16.precision == "bf16" and len(cat.evaluations(ckpt.id)) == 2
+        with pytest.raises(Exception, match="fp32\\) is already recorded with 80 successes"):
+            cat.add_evaluation(ckpt.id, "base", episodes=100, successes=79, seed=3000)

@@ -95,3 +95,12 @@ def test_the_trunk_input_is_the_images_and_coordinates_in_the_callers_layout_and
     with torch.autocast("cpu", dtype=torch.bfloat16):
         x16 = net.input(image)
     assert x16.dtype == torch.bfloat16 and torch.equal(x16, expected.to(torch.bfloat16))  # what the cast would give
+
+
+def test_a_bf16_run_updates_with_fused_adam_and_fp32_with_torchs_default():
+    from nsl.learners import NetConfig, QNetwork, TrainConfig
+    from nsl.learners.qtopt import Learner
+
+    net = QNetwork(NetConfig(image_size=16))
+    assert Learner.create(net, 1e-3, TrainConfig(precision="bf16")).optimizer.defaults["fused"] is True
+    assert Learner.create(net, 1e-3, TrainConfig()).optimizer.defaults["fused"] is None  # the loop fp32 always ran
