@@ -30,9 +30,10 @@ SCRIPTED_EPISODES_PER_S = 25.0  # oracle/random collection, 2 simulator processe
 CHECKPOINT_EPISODES_PER_S = 25.0  # CEM-policy collection (with epsilon), 2 processes, 8 envs each
 EVAL_EPISODES_PER_S = 35.0  # CEM-policy evaluation, 2 processes, 8 envs each
 STEPS_PER_S = {"ft": 11.0, "new_head": 11.0, "scratch": 11.0, "pnn": 5.0, "ft_pnn": 5.0}
-# Training units with precision bf16 (or auto on a CPU with bfloat16): `nsl bench learner` measured the bfloat16
-# step at 1.5-2.1x the float32 step on this machine (AVX-512 BF16, no AMX); rounded down.
-BF16_STEP_SPEEDUP = 1.5
+# Training units with precision bf16 (or auto on a CPU with bfloat16): the `full` study's bf16 fine-tunes took 73-80 s
+# for 2,000 steps on one thread each (25-27 steps/s, two units at a time, AVX-512 BF16, no AMX), where its float32
+# units had logged 12-13 steps/s; `nsl bench learner` gives 1.6-1.7x in alternating rounds.  Rounded down.
+BF16_STEP_SPEEDUP = 1.8
 IMAGE_CACHE_FRAMES_PER_S = 8_000.0  # first use of a dataset version: decode its PNG frames once
 FRAMES_PER_EPISODE = 8
 
