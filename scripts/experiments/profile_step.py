@@ -14,11 +14,29 @@ import numpy as np
 import torch
 from torch.profiler import profile
 
-from nsl.bench.learner import BATCH, _synthetic_sampler
-from nsl.learners import Learner, NetConfig, QNetwork, TrainConfig, update
+from nsl import keys
+from nsl.learners import ArraySampler, Learner, NetConfig, QNetwork, TrainConfig, update
 from nsl.learners.qtopt import batch_to_torch
 
 STEPS = 10
+BATCH = 64
+
+
+def synthetic_sampler(n: int = 512, seed: int = 0) -> ArraySampler:
+    """Random 64x64 transitions in episodes of 8 frames, as ``nsl bench learner`` builds them."""
+    rng = np.random.default_rng(seed)
+    ep = np.arange(n) % 8
+    return ArraySampler(
+        rng.integers(0, 256, (n, 64, 64, 3), dtype=np.uint8),
+        rng.random((n, len(keys.STATE_NAMES)), dtype=np.float32),
+        rng.uniform(-1, 1, (n, len(keys.ACTION_NAMES))).astype(np.float32),
+        ((ep == 7) & (rng.random(n) < 0.5)).astype(np.float32),
+        (ep == 7).astype(np.float32),
+        np.minimum(np.arange(n) + 1, n - 1),
+        name="synthetic",
+    )
+
+
 KINDS = {  # profiler op name -> row of the table
     "aten::mkldnn_convolution": "convolutions, forward (online, Polyak and lagged trunks)",
     "aten::convolution_backward": "convolutions, backward",
@@ -35,7 +53,7 @@ KINDS = {  # profiler op name -> row of the table
 
 def profile_steps(precision: str) -> tuple[float, dict[str, float], list]:
     cfg = TrainConfig(batch_size=BATCH, seed=0, precision=precision)
-    sampler, rng = _synthetic_sampler(), np.random.default_rng(0)
+    sampler, rng = synthetic_sampler(), np.random.default_rng(0)
     batches = [batch_to_torch(sampler.sample(BATCH, rng)) for _ in range(8)]
     torch.manual_seed(0)
     learner = Learner.create(QNetwork(NetConfig()), 3e-4, cfg)
