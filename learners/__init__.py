@@ -42,7 +42,7 @@ _EXPORTS = {
     "networks": ("QNetwork",),
     "policy": ("CEMPolicy", "load_policy"),
     "qtopt": ("Learner", "bellman_target", "update"),
-    "sampler": ("ArraySampler", "Sampler"),
+    "sampler": ("ArraySampler", "Sampler", "synthetic_sampler"),
     "training": ("FINAL_DIR", "TrainResult", "inherited_settings", "train"),
 }
 __all__, __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
@@ -67,5 +67,5 @@ if TYPE_CHECKING:  # static analysers see the eager imports
     from .networks import QNetwork  # noqa: F401
     from .policy import CEMPolicy, load_policy  # noqa: F401
     from .qtopt import Learner, bellman_target, update  # noqa: F401
-    from .sampler import ArraySampler, Sampler  # noqa: F401
+    from .sampler import ArraySampler, Sampler, synthetic_sampler  # noqa: F401
     from .training import FINAL_DIR, TrainResult, inherited_settings, train  # noqa: F401

@@ -174,3 +174,19 @@ class ArraySampler:
                 }
             ]
         }
+
+
+def synthetic_sampler(n: int = 512, seed: int = 0, image_size: int = 64) -> ArraySampler:
+    """Random transitions in episodes of 8 frames (the last one terminal, half of those rewarded): speed probes'
+    data, whose values do not change the work of a step."""
+    rng = np.random.default_rng(seed)
+    ep = np.arange(n) % 8
+    return ArraySampler(
+        rng.integers(0, 256, (n, image_size, image_size, 3), dtype=np.uint8),
+        rng.random((n, len(keys.STATE_NAMES)), dtype=np.float32),
+        rng.uniform(-1, 1, (n, len(keys.ACTION_NAMES))).astype(np.float32),
+        ((ep == 7) & (rng.random(n) < 0.5)).astype(np.float32),
+        (ep == 7).astype(np.float32),
+        np.minimum(np.arange(n) + 1, n - 1),
+        name="synthetic",
+    )

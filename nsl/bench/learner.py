@@ -51,22 +51,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _synthetic_sampler(n: int = 512, seed: int = 0):
-    import numpy as np
+    from nsl.learners import synthetic_sampler
 
-    from nsl.learners import ArraySampler
-
-    rng = np.random.default_rng(seed)
-    images = rng.integers(0, 256, (n, IMAGE, IMAGE, 3), dtype=np.uint8)
-    ep = np.arange(n) % 8
-    return ArraySampler(
-        images,
-        rng.random((n, len(keys.STATE_NAMES)), dtype=np.float32),
-        rng.uniform(-1, 1, (n, len(keys.ACTION_NAMES))).astype(np.float32),
-        ((ep == 7) & (rng.random(n) < 0.5)).astype(np.float32),
-        (ep == 7).astype(np.float32),
-        np.minimum(np.arange(n) + 1, n - 1),
-        name="synthetic",
-    )
+    return synthetic_sampler(n, seed, IMAGE)
 
 
 def _time(step_fn, warmup: int, steps: int) -> float:

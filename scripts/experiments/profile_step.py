@@ -14,27 +14,11 @@ import numpy as np
 import torch
 from torch.profiler import profile
 
-from nsl import keys
-from nsl.learners import ArraySampler, Learner, NetConfig, QNetwork, TrainConfig, update
+from nsl.learners import Learner, NetConfig, QNetwork, TrainConfig, synthetic_sampler, update
 from nsl.learners.qtopt import batch_to_torch
 
 STEPS = 10
 BATCH = 64
-
-
-def synthetic_sampler(n: int = 512, seed: int = 0) -> ArraySampler:
-    """Random 64x64 transitions in episodes of 8 frames, as ``nsl bench learner`` builds them."""
-    rng = np.random.default_rng(seed)
-    ep = np.arange(n) % 8
-    return ArraySampler(
-        rng.integers(0, 256, (n, 64, 64, 3), dtype=np.uint8),
-        rng.random((n, len(keys.STATE_NAMES)), dtype=np.float32),
-        rng.uniform(-1, 1, (n, len(keys.ACTION_NAMES))).astype(np.float32),
-        ((ep == 7) & (rng.random(n) < 0.5)).astype(np.float32),
-        (ep == 7).astype(np.float32),
-        np.minimum(np.arange(n) + 1, n - 1),
-        name="synthetic",
-    )
 
 
 KINDS = {  # profiler op name -> row of the table
