@@ -5,6 +5,7 @@ checkpoint folders shaped like Hugging Face model repositories.  Public
 surface (import from ``nsl.catalog``)::
 
     Catalog                                   # open it: Catalog() or Catalog(path)
+    NO_CATALOG_ENV                            # "NSL_NO_CATALOG": 1 forbids a process to open it (cluster units)
       .register_dataset(name, version, path, *, hash, shift, episodes, provenance)
       .save_checkpoint(name, step, weights, config, *, parent, data, shift, card_info)
       .register_checkpoint(folder, *, name, step, parent, data, shift, card_info)
@@ -55,10 +56,11 @@ from .records import (
 )
 from .render import render_model_card
 from .schema import MIGRATIONS, SCHEMA_VERSION
-from .store import Catalog, best_checkpoint
+from .store import NO_CATALOG_ENV, Catalog, best_checkpoint
 
 __all__ = [
     "CARD_FILE",
+    "NO_CATALOG_ENV",
     "CONFIG_FILE",
     "WEIGHTS_FILE",
     "Catalog",

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import sqlite3
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -77,11 +78,24 @@ def _code_version() -> str:
     return _current_code_version()
 
 
+NO_CATALOG_ENV = "NSL_NO_CATALOG"  # "1": this process must not open the catalog (a study unit on a cluster node)
+
+
 class Catalog:
-    """An open catalog.  One per process (open it again after fork); close it or use ``with``."""
+    """An open catalog.  One per process (open it again after fork); close it or use ``with``.
+
+    A process with ``$NSL_NO_CATALOG=1`` may not open it (a study's unit on a cluster node: its driver resolves
+    the references the unit needs and registers what it made, since SQLite in WAL mode must not be shared across
+    machines).
+    """
 
     def __init__(self, path: Path | str | None = None):
         self.path = Path(path) if path is not None else workspace.catalog_path()
+        if os.environ.get(NO_CATALOG_ENV) == "1":
+            raise ConfigError(
+                f"this process may not open the catalog {self.path} (${NO_CATALOG_ENV}=1: a study unit whose "
+                "driver resolves its references and registers its outputs); open it on the driver"
+            )
         self.conn = schema.connect(self.path, code_version=_code_version())
 
     def close(self) -> None:

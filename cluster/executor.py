@@ -53,13 +53,14 @@ def parse_cluster(value: str | None) -> str:
     raise ConfigError(f"{where} {spec!r} is not a cluster; use local, ray, auto or ray://HOST:PORT")
 
 
-def add_option(parser) -> None:
+def add_option(parser, help: str | None = None) -> None:
     """Add ``--cluster`` to a subcommand's parser."""
     parser.add_argument(
         "--cluster",
         default=None,
         metavar="local|ray|auto|ray://HOST:PORT",
-        help=f"where simulators run: local processes (default, or ${CLUSTER_ENV}), Ray on this "
+        help=help
+        or f"where simulators run: local processes (default, or ${CLUSTER_ENV}), Ray on this "
         "machine or at $RAY_ADDRESS (ray), or an existing Ray cluster (auto, ray://...); "
         "results are identical; see docs/scale.md",
     )
@@ -96,6 +97,7 @@ class UnitFailed(NslError):
         text = str(error) if isinstance(error, NslError) else f"{type(error).__name__}: {error}"
         super().__init__(f"unit {key} failed: {text.splitlines()[0] if text else type(error).__name__}")
         self.key = key
+        self.error = error  # the unit's own exception (unwrapped from Ray's)
 
 
 class Executor:
@@ -160,6 +162,9 @@ class RayExecutor(Executor):
         self._started = False  # True once this executor called ray.init (so close() calls ray.shutdown)
         self._pending: dict[Any, str] = {}  # unit task ref -> key
         self._marker: Path | None = None
+        from nsl.version import code_version
+
+        self.code_version = code_version()  # every task must run the same nsl (checked on its node)
         from .collect import RayChunkRunner
 
         self.runner = RayChunkRunner(self)
@@ -207,7 +212,7 @@ class RayExecutor(Executor):
         task = _remote(ray, _call_unit)
         ref = task.options(
             num_cpus=unit.num_cpus, max_retries=self.max_retries, retry_exceptions=False, name=f"nsl-unit:{unit.key}"
-        ).remote(unit.fn, unit.args, unit.kwargs, str(self._shared_marker()), unit.num_cpus)
+        ).remote(unit.fn, unit.args, unit.kwargs, str(self._shared_marker()), unit.num_cpus, self.code_version)
         self._pending[ref] = unit.key
 
     @property
@@ -254,11 +259,19 @@ def open_executor(value: str | None = None, **init_kwargs) -> Executor:
     return Executor() if spec == "local" else RayExecutor(spec, init_kwargs)
 
 
-def _call_unit(fn, args: tuple, kwargs: dict, marker: str, num_cpus: float):
-    """A unit inside a Ray task: check the shared workspace, point NSL_HOME at it, run with its CPUs' threads."""
+def _call_unit(fn, args: tuple, kwargs: dict, marker: str, num_cpus: float, driver_version: str | None = None):
+    """A unit inside a Ray task: check the nsl version and the shared workspace, point NSL_HOME at it, run with
+    its CPUs' threads."""
     import socket
     import sys
 
+    from nsl.version import code_version
+
+    if driver_version is not None and code_version() != driver_version:
+        raise EnvironmentSetupError(
+            f"node {socket.gethostname()} runs nsl {code_version()}, but the driver runs {driver_version}; install "
+            "the same nsl on every node (docs/scale.md)"
+        )
     path = Path(marker)
     if not path.is_file():
         raise EnvironmentSetupError(

@@ -207,11 +207,22 @@ class StudyRun:
     status: dict[str, Any]
 
 
-def study_run(plan: str, *, name: str | None = None, workers: int = 1, progress: bool = True) -> StudyRun:
-    """Run (or resume) a study plan (``tiny``, ``small``, ``full``, ``paper`` or a TOML path) and write its report."""
+def study_run(
+    plan: str,
+    *,
+    name: str | None = None,
+    workers: int = 1,
+    progress: bool = True,
+    cluster: str | None = None,
+    unit_cpus: float = 1.0,
+) -> StudyRun:
+    """Run (or resume) a study plan (``tiny``, ``small``, ``full``, ``paper`` or a TOML path) and write its report.
+
+    ``cluster`` (``ray``, ``auto``, ``ray://HOST:PORT``; None: ``$NSL_CLUSTER``, else local) runs every unit as a
+    Ray task holding ``unit_cpus`` CPUs (docs/scale.md)."""
     from nsl.study import run_study, study_dir
 
-    status = run_study(plan, name, workers=workers, progress=progress)
+    status = run_study(plan, name, workers=workers, progress=progress, cluster=cluster, unit_cpus=unit_cpus)
     folder = study_dir(status["study"])
     return StudyRun(status["study"], folder, folder / "report.md", status)
 
@@ -230,11 +241,21 @@ def study_report(name: str) -> Path:
     return write_study_report(name)
 
 
-def transfer_run(plan: str, *, name: str | None = None, workers: int = 1, progress: bool = True) -> StudyRun:
-    """Measure a transfer-advantage matrix (``nsl transfer run``); the report holds matrix.json and matrix.md."""
+def transfer_run(
+    plan: str,
+    *,
+    name: str | None = None,
+    workers: int = 1,
+    progress: bool = True,
+    cluster: str | None = None,
+    unit_cpus: float = 1.0,
+) -> StudyRun:
+    """Measure a transfer-advantage matrix (``nsl transfer run``); the report holds matrix.json and matrix.md.
+
+    ``cluster`` and ``unit_cpus`` as for :func:`study_run`."""
     from nsl.study import run_transfer
 
-    status, report = run_transfer(plan, name, workers=workers, progress=progress)
+    status, report = run_transfer(plan, name, workers=workers, progress=progress, cluster=cluster, unit_cpus=unit_cpus)
     folder = Path(report["matrix"]).parent
     return StudyRun(folder.name, folder, Path(report["report"]), {**status, "report": report})
 

@@ -37,12 +37,14 @@ def collect(
     stop_after_files: int = 0,
     cluster: str | None = None,
     progress: bool = True,
+    register: bool = True,
 ):
     """Collect ``cfg.episodes`` episodes into dataset ``cfg.data`` (resuming or appending); returns its DatasetVersion.
 
     ``restart`` discards an unfinished collection; ``cluster`` runs the episodes on Ray (None: ``$NSL_CLUSTER``
     or local processes).  An interruption raises KeyboardInterrupt with the finished files staged, so the same
-    call resumes.
+    call resumes.  ``register=False`` leaves the catalog alone (:func:`on_version_created` records the version
+    later, in the process that writes the catalog).
     """
     from nsl.collectors import EnvConfig, collect_episodes
     from nsl.datasets import api
@@ -95,7 +97,8 @@ def collect(
         }
     )
     info = version.describe()
-    on_version_created(version)
+    if register:
+        on_version_created(version)
     print(
         f"wrote {version.ref}: {version.num_episodes} episodes ({coll.stop - coll.start} new), "
         f"{version.num_frames} frames, success {info['success_rate']:.1%}, {version.hash[:19]}... "

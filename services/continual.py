@@ -88,9 +88,11 @@ def continual(config: ContinualConfig, name: str = "continual", *, progress: boo
 
 def _fine_tune(data: str, init: str, name: str, shift: str, cfg: ContinualConfig, progress: bool) -> str:
     """Fine-tune ``init`` on ``data`` mixed 50/50 with the base data; returns the checkpoint id."""
-    return train_service.fine_tune_half_half(
+    result = train_service.fine_tune_half_half(
         cfg.base_data, data, init, name, steps=cfg.steps, seed=cfg.seed, shift=shift, progress=progress
-    ).id
+    )
+    assert result.id is not None  # registered (the default)
+    return result.id
 
 
 def _stage(run: str, i: int, shift: str, policy: str, cfg: ContinualConfig, progress: bool) -> str:

@@ -11,7 +11,7 @@ from typing import Any
 
 from .options import EvaluateOptions
 
-__all__ = ["EvaluateOptions", "EvaluationResult", "evaluate"]
+__all__ = ["EvaluateOptions", "EvaluationResult", "evaluate", "store_evaluation"]
 
 
 @dataclass(frozen=True)
@@ -24,6 +24,7 @@ class EvaluationResult:
     paired: dict  # {shift: PairedComparison}, with exactly two refs
     stored: dict  # {ref: catalog id} of the checkpoints whose evaluations were stored
     precision: str = "fp32"  # what checkpoint policies acted in (fp32 or bf16)
+    source: str | None = None  # recorded with each catalogued evaluation (e.g. "study")
 
     def __getitem__(self, key: str) -> Any:  # result["table"], as the dict it replaces
         return getattr(self, key)
@@ -36,6 +37,7 @@ def evaluate(
     progress: bool = True,
     source: str | None = None,
     cluster: str | None = None,
+    register: bool = True,
 ) -> EvaluationResult:
     """Evaluate policy references on shifts; checkpoint results go to the catalog.
 
@@ -43,7 +45,9 @@ def evaluate(
     ``options`` are those of ``nsl eval``; ``source`` is recorded with each
     catalogued evaluation (e.g. "continual"); ``cluster`` runs the scenes on
     Ray (``--cluster``; None: ``$NSL_CLUSTER`` or local).  The paired
-    comparison is made for exactly two refs.
+    comparison is made for exactly two refs.  ``register=False`` stores
+    nothing (``stored`` is empty): :func:`store_evaluation` does it later, in
+    the process that writes the catalog (a study's driver).
     """
     from nsl.collectors import EnvConfig, parse_shift_list
     from nsl.errors import ConfigError
@@ -82,12 +86,20 @@ def evaluate(
             for ref, make in factories.items()
         }
     table = {ref: {s: success_rate_from_outcomes(s, out) for s, out in res.items()} for ref, res in outcomes.items()}
-    stored = _store(table, config, source, precision, outcomes)
     paired = {}
     if len(refs) == 2:
         a, b = refs
         paired = {s: compare_paired(outcomes[a][s], outcomes[b][s], a, b) for s in outcomes[a]}
-    return EvaluationResult(config, outcomes, table, paired, stored, precision)
+    result = EvaluationResult(config, outcomes, table, paired, {}, precision, source)
+    return store_evaluation(result) if register else result
+
+
+def store_evaluation(result: EvaluationResult) -> EvaluationResult:
+    """Record a result's checkpoint evaluations in the catalog (idempotent); returns it with ``stored`` filled."""
+    from dataclasses import replace
+
+    stored = _store(result.table, result.config, result.source, result.precision, result.outcomes)
+    return replace(result, stored=stored)
 
 
 def _store(table, config, source: str | None, precision: str, outcomes: dict) -> dict[str, str]:

@@ -7,7 +7,25 @@ callable that builds the policy inside each worker process.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from typing import Any
+
+_PINNED: dict[str, Any] = {}  # ref -> CheckpointEntry resolved elsewhere (a cluster unit's driver): see pin()
+
+
+def pin(entries: Mapping[str, Any]) -> None:
+    """Resolve these checkpoint references to these catalog entries in this process, without the catalog.
+
+    A study unit on a cluster node gets them from its driver (which alone opens the catalog); ``pin({})``
+    forgets them.
+    """
+    _PINNED.clear()
+    _PINNED.update(entries)
+
+
+def pinned(ref: str):
+    """The entry pinned for ``ref``, else None."""
+    return _PINNED.get(ref)
 
 
 def policy_factory(
@@ -25,8 +43,10 @@ def policy_factory(
         from nsl.learners import load_policy
         from nsl.learners.precision import resolve_precision
 
-        with Catalog() as cat:
-            entry = resolve_init(cat, ref)
+        entry = pinned(ref)
+        if entry is None:
+            with Catalog() as cat:
+                entry = resolve_init(cat, ref)
         factory = functools.partial(
             load_policy,
             str(entry.path),
@@ -52,16 +72,23 @@ def dataset_uses(cat, mix: list[tuple[str, float]]) -> list:
     """Resolve ``[(NAME[@vN][:TIER], weight)]`` to catalog ``DataUse`` records.
 
     A dataset version that exists on disk but is not yet in the catalog is
-    registered first (the dataset folder is the record of truth).
+    registered first (the dataset folder is the record of truth); with
+    ``cat=None`` nothing is registered (whoever registers the run does).
     """
     from nsl.catalog import DataUse
     from nsl.datasets import api
+    from nsl.errors import UnknownReferenceError
 
     uses = []
     for ref, weight in mix:
         view = api.open_view(ref)
         v = view.version
-        register_dataset(cat, v)
+        try:
+            known = cat is None or cat.dataset(v.name, v.version).hash == v.hash
+        except UnknownReferenceError:
+            known = False
+        if not known:  # (a different hash under that version is refused by the catalog)
+            register_dataset(cat, v)
         uses.append(DataUse(v.name, v.version, weight=weight, tier=api.parse_ref(ref).tier, hash=v.hash))
     return uses
 
@@ -81,8 +108,9 @@ def register_dataset(cat, version) -> None:
 
 
 def resolve_init(cat, ref: str):
-    """A parent checkpoint from the catalog (``ckpt:base`` falls back to the one shipped with nsl)."""
-    return cat.resolve_checkpoint(ref)
+    """A parent checkpoint from the catalog (``ckpt:base`` falls back to the one shipped with nsl), or pinned."""
+    entry = pinned(ref)
+    return entry if entry is not None else cat.resolve_checkpoint(ref)
 
 
 def transfer_matrix(matrix=None, transfer: str | None = None):

@@ -33,12 +33,41 @@ class TrainResult:
     """What a training run wrote: the final checkpoint's catalog ref and id, its folder, and the run folder."""
 
     checkpoint: str  # ckpt:NAME@STEP of the final checkpoint
-    id: str  # its catalog id (content hash)
+    id: str | None  # its catalog id (content hash); None until registered (register=False)
     path: Path  # its folder
     step: int
     run_dir: Path  # $NSL_HOME/runs/NAME (metrics, curve.csv with early stopping)
     best: str | None = None  # with early stopping: ckpt:NAME@STEP of the chosen step (or the parent's ref)
     best_step: int | None = None
+    made: TrainingOutput | None = None  # with register=False: what to register (id is None until then)
+
+
+@dataclass(frozen=True)
+class TrainingOutput:
+    """What a training run wrote, for the catalog: :func:`register_training` records it (in any process that
+    sees the same ``NSL_HOME``; a study on a cluster does it on its driver)."""
+
+    name: str  # the run's name (checkpoints ckpt:NAME@STEP)
+    run_dir: Path
+    final: Path  # the last checkpoint's folder
+    parent: str | None  # the parent checkpoint's catalog id (None: from scratch)
+    uses: tuple  # DataUse of every dataset trained on
+    shift: str  # the shift it was trained for
+    scenes: int | None  # with a curve: the scene seed of its simulator evaluations
+    source: str = "early stopping"  # label of the curve's catalogued evaluations
+
+
+def register_training(made: TrainingOutput):
+    """Catalogue a finished run: every evaluated step of its curve with its evaluations, then the final
+    checkpoint (returned).  Idempotent."""
+    from nsl.catalog import Catalog
+
+    with Catalog() as cat:
+        if made.scenes is not None:
+            register_evaluated(
+                cat, made.name, made.run_dir, made.parent, made.uses, made.shift, made.scenes, made.source
+            )
+        return register_checkpoint(cat, made.name, made.final, made.parent, made.uses, made.shift)
 
 
 def parse_data(specs: list[str] | tuple[str, ...]) -> list[tuple[str, float]]:
@@ -134,6 +163,7 @@ def train(
     stop: bool = True,
     source: str = "early stopping",
     quiet: bool = False,
+    register: bool = True,
 ) -> TrainResult:
     """Train (or resume) run ``options.name`` and catalogue its checkpoints.
 
@@ -143,7 +173,9 @@ def train(
     criterion is an offline one).  ``stop=False`` never stops early: the
     curve is recorded to the last step, so each criterion can be replayed on
     it afterwards (the study does).  ``source`` labels the catalogued
-    early-stopping evaluations.
+    early-stopping evaluations.  ``register=False`` writes nothing to the
+    catalog: the result's ``made`` goes to :func:`register_training` later
+    (a study unit on a cluster node, registered by its driver).
     """
     from nsl import code_version, workspace
     from nsl.catalog import Catalog
@@ -178,11 +210,15 @@ def train(
             "--net sets the architecture of a new network; with --init the parent's is kept "
             "(drop --net, or drop --init to pre-train)"
         )
-    with Catalog() as cat:
-        from .refs import dataset_uses, resolve_init
+    from .refs import dataset_uses, pinned, resolve_init
 
-        uses = dataset_uses(cat, mix)  # validates the refs and registers unknown versions
-        parent = resolve_init(cat, o.init) if o.init else None
+    parent = pinned(o.init) if o.init else None
+    if register or (o.init and parent is None):
+        with Catalog() as cat:
+            uses = dataset_uses(cat, mix)  # validates the refs and registers unknown versions
+            parent = resolve_init(cat, o.init) if o.init else None
+    else:  # nothing to look up (the parent is pinned): the catalog is left to whoever registers the run
+        uses = dataset_uses(None, mix)
     views = [api.open_view(ref) for ref, _ in mix]
     for view in views:
         check_env_version(view)
@@ -256,13 +292,23 @@ def train(
         progress=progress,
         **({"net": net_config} if net_config is not None else {}),
     )
-    with Catalog() as cat:
-        if monitor is not None:
-            register_evaluated(cat, o.name, run_dir, parent, uses, target_shift, monitor.config.seed, source)
-        entry = register_checkpoint(cat, o.name, result.checkpoint, parent, uses, target_shift)
-    out = TrainResult(f"ckpt:{o.name}@{result.step}", entry.id, Path(entry.path), result.step, run_dir)
-    if not quiet:
-        print(f"checkpoint {out.checkpoint} ({entry.id[:12]}) -> {entry.path}")
+    made = TrainingOutput(
+        name=o.name,
+        run_dir=run_dir,
+        final=Path(result.checkpoint),
+        parent=parent.id if parent else None,
+        uses=tuple(uses),
+        shift=target_shift,
+        scenes=monitor.config.seed if monitor is not None else None,
+        source=source,
+    )
+    if register:
+        entry = register_training(made)
+        out = TrainResult(f"ckpt:{o.name}@{result.step}", entry.id, Path(entry.path), result.step, run_dir)
+        if not quiet:
+            print(f"checkpoint {out.checkpoint} ({entry.id[:12]}) -> {entry.path}")
+    else:
+        out = TrainResult(f"ckpt:{o.name}@{result.step}", None, made.final, result.step, run_dir, made=made)
     if monitor is None:
         return out
     best_step = monitor.stopper.best_step
@@ -275,7 +321,7 @@ def train(
         text = f"step {best_step}, the starting point" + (f" ({parent.ref})" if parent else " (untrained)")
     if not quiet:
         print(f"best by {o.criterion}: {text}; curve in {run_dir / 'curve.csv'}; plot it with `nsl report {run_dir}`")
-    return TrainResult(out.checkpoint, out.id, out.path, out.step, run_dir, best, best_step)
+    return TrainResult(out.checkpoint, out.id, out.path, out.step, run_dir, best, best_step, out.made)
 
 
 def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
@@ -307,22 +353,22 @@ def _monitor(o: TrainOptions, run_dir: Path, target_shift: str, held_out, *, gam
     return EarlyStopMonitor(cfg, run_dir, score_target=score_target, score_base=score_base, offline=offline)
 
 
-def register_checkpoint(cat, name: str, folder: Path, parent, uses, shift: str):
-    """Catalogue one checkpoint folder of run ``name`` (its step from its config) with parent, data and shift."""
+def register_checkpoint(cat, name: str, folder: Path, parent: str | None, uses, shift: str):
+    """Catalogue one checkpoint folder of run ``name`` (its step from its config) with parent id, data and shift."""
     config = json.loads((Path(folder) / "config.json").read_text())
     return cat.save_checkpoint(
         name,
         int(config.get("step", 0)),
         Path(folder) / "model.safetensors",
         config,
-        parent=parent.id if parent else None,
+        parent=parent,
         data=uses,
         shift=shift,
     )
 
 
 def register_evaluated(
-    cat, name: str, run_dir: Path, parent, uses, shift: str, seed: int, source: str = "early stopping"
+    cat, name: str, run_dir: Path, parent: str | None, uses, shift: str, seed: int, source: str = "early stopping"
 ) -> None:
     """Catalogue every evaluated checkpoint (so ckpt:NAME@STEP resolves) with its simulator evaluations.
 

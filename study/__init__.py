@@ -13,7 +13,15 @@ A wiring layer like the CLI: it imports the five folders, and they never import 
     suggest_base                         # proxy.py: rank checkpoints for a new task (measured, else offline proxy)
 """
 
-from .driver import estimate_study, run_study, status_lines, study_dir, study_status, write_study_report
+from .driver import (
+    cluster_slots,
+    estimate_study,
+    run_study,
+    status_lines,
+    study_dir,
+    study_status,
+    write_study_report,
+)
 from .plan import SHIPPED, Plan, load_plan
 from .proxy import suggest_base
 from .scheduler import run_graph
@@ -31,6 +39,7 @@ from .units import Unit, build_units, unit_graph
 __all__ = [
     "SHIPPED",
     "SHIPPED_TRANSFER",
+    "cluster_slots",
     "estimate_study",
     "estimate_transfer",
     "Plan",

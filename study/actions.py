@@ -200,21 +200,68 @@ def evaluation(ref: str, shift: str, episodes: int, seed: int):
 # --- run ------------------------------------------------------------------------------------------------------------
 
 
-def run_unit(unit: Unit, workers: int = 1, progress: bool = True) -> dict[str, Any]:
-    """Do the unit's job; ``workers`` simulator processes inside it.  Returns a small summary."""
+def run_unit(unit: Unit, workers: int = 1, progress: bool = True, register: bool = True) -> dict[str, Any]:
+    """Do the unit's job; ``workers`` simulator processes inside it.  Returns a small summary.
+
+    ``register=False`` writes its dataset, checkpoint or evaluation to ``NSL_HOME`` but not to the catalog:
+    the summary's ``made`` goes to :func:`register_unit` in the process that writes the catalog (the scheduler).
+    """
+    from nsl.services.refs import pin
+
     started = time.perf_counter()
-    if unit.kind == "collect":
-        out = _collect(unit, workers, progress)
-    elif unit.kind == "train":
-        out = _train(unit, workers, progress)
-    elif unit.kind == "eval":
-        out = _evaluate(unit, workers, progress)
-    else:
-        raise ConfigError(f"unit {unit.name} has unknown kind {unit.kind!r}")
+    pin(unit.params.get("pinned") or {})  # checkpoints resolved by the scheduler (prepare_unit)
+    try:
+        if unit.kind == "collect":
+            out = _collect(unit, workers, progress, register)
+        elif unit.kind == "train":
+            out = _train(unit, workers, progress, register)
+        elif unit.kind == "eval":
+            out = _evaluate(unit, workers, progress, register)
+        else:
+            raise ConfigError(f"unit {unit.name} has unknown kind {unit.kind!r}")
+    finally:
+        pin({})
     return {**out, "seconds": round(time.perf_counter() - started, 2)}
 
 
-def _collect(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
+def prepare_unit(unit: Unit) -> Unit:
+    """The unit with the checkpoints it reads resolved in the catalog (``params["pinned"]``), so that it runs
+    where the catalog is not (a worker process, a cluster node).  Called when its dependencies are done."""
+    from dataclasses import replace
+
+    p = unit.params
+    refs = [p.get("policy_ref"), p.get("init_ref"), p.get("checkpoint_ref")]
+    refs = [r for r in refs if isinstance(r, str) and (r.startswith("ckpt:") or r == "base")]
+    if not refs:
+        return unit
+    from nsl.catalog import Catalog
+
+    with Catalog() as cat:
+        pinned = {r: resolve_init(cat, r) for r in refs}
+    return replace(unit, params={**p, "pinned": pinned})
+
+
+def register_unit(unit: Unit, summary: Mapping[str, Any]) -> None:
+    """Record in the catalog what a unit run with ``register=False`` made (idempotent)."""
+    made = summary.get("made")
+    if made is None:
+        return
+    if unit.kind == "collect":
+        from nsl.datasets import api
+        from nsl.services.collect import on_version_created
+
+        on_version_created(api.open_version(made))
+    elif unit.kind == "train":
+        from nsl.services.train import register_training
+
+        register_training(made)
+    elif unit.kind == "eval":
+        from nsl.services.evaluate import store_evaluation
+
+        store_evaluation(made)
+
+
+def _collect(unit: Unit, workers: int, progress: bool, register: bool = True) -> dict[str, Any]:
     """``nsl collect`` (begin or resume, fill the missing episodes, publish, catalogue), then check the hash."""
     from nsl.services.collect import CollectConfig, collect
 
@@ -233,6 +280,8 @@ def _collect(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
             epsilon=p["epsilon"],
         ),
         progress=progress,
+        cluster="local",  # the unit's own simulators (on a cluster, the unit is the task)
+        register=register,
     )
     if p.get("expect_hash") and version.hash != p["expect_hash"]:
         raise CorruptDataError(
@@ -244,6 +293,7 @@ def _collect(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
         "hash": version.hash,
         "episodes": version.num_episodes,
         "success_rate": float(version.episodes.success.mean()),
+        **({} if register else {"made": version.ref}),
     }
 
 
@@ -263,7 +313,7 @@ def _data_mix(p: Mapping[str, Any]) -> list[tuple[str, float]]:
     return mix
 
 
-def _train(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
+def _train(unit: Unit, workers: int, progress: bool, register: bool = True) -> dict[str, Any]:
     """``nsl train`` on the unit's data mix and parent (resumable); with a curve, every criterion to the last step."""
     from nsl.services.train import TrainOptions, train
 
@@ -290,16 +340,17 @@ def _train(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
     result = train(
         options,
         progress=progress,
-        record={"argv": ["nsl", "study", "unit", unit.name], "unit": dict(p)},
+        record={"argv": ["nsl", "study", "unit", unit.name], "unit": {k: v for k, v in p.items() if k != "pinned"}},
         offline=bool(m.get("holdout")),
         stop=False,
         source="study curve",
         quiet=True,
+        register=register,
     )
-    return {"checkpoint": result.checkpoint, "id": result.id}
+    return {"checkpoint": result.checkpoint, "id": result.id, **({} if register else {"made": result.made})}
 
 
-def _evaluate(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
+def _evaluate(unit: Unit, workers: int, progress: bool, register: bool = True) -> dict[str, Any]:
     """``nsl eval``: success with a Wilson interval on test objects, stored in the catalog."""
     from nsl.services.evaluate import EvaluateOptions, evaluate
 
@@ -309,6 +360,8 @@ def _evaluate(unit: Unit, workers: int, progress: bool) -> dict[str, Any]:
         EvaluateOptions(shift=p["shift"], episodes=p["episodes"], seed=p["seed"], workers=workers, batch_size=8),
         progress=progress,
         source="study",
+        cluster="local",
+        register=register,
     )
     (r,) = result.table[p["checkpoint_ref"]].values()
-    return {"successes": r.successes, "episodes": r.episodes}
+    return {"successes": r.successes, "episodes": r.episodes, **({} if register else {"made": result})}

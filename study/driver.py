@@ -59,30 +59,98 @@ def prepare(plan_ref: str, name: str | None = None):
     return plan, name, units, unit_graph(units)
 
 
-def estimate_study(plan_ref: str, name: str | None = None):
-    """The estimated cost of the units not done yet (nothing runs, nothing is written)."""
-    from .estimate import estimate
-
+def estimate_study(plan_ref: str, name: str | None = None, slots: int | None = None):
+    """The estimated cost of the units not done yet (nothing runs, nothing is written); with ``slots``, also
+    the wall time of running that many units at once (:func:`nsl.study.estimate.schedule`): (cost, schedule)."""
     _, _, units, graph = prepare(plan_ref, name)
+    return estimate_units(units, graph, slots)
+
+
+def estimate_units(units: dict, graph, slots: int | None = None):
+    """:func:`estimate_study` of a built unit graph (a study's or a transfer's)."""
+    from .estimate import estimate, schedule
+
     done = [n for n in order(graph) if actions.is_done(units[n])]
-    return estimate([units[n] for n in order(graph)], done)
+    cost = estimate([units[n] for n in order(graph)], done)
+    if slots is None:
+        return cost
+    return cost, schedule(graph, slots, done)
 
 
-def run_study(plan_ref: str, name: str | None = None, workers: int = 1, progress: bool = True) -> dict[str, Any]:
-    """Run (or resume) a study; writes its report at the end.  Returns the final status record."""
+def cluster_slots(cluster: str | None, workers: int, unit_cpus: float = 1.0) -> int:
+    """Units at once: ``workers`` locally, else the cluster's CPUs over the CPUs a unit holds (connects)."""
+    from nsl.cluster import open_executor, parse_cluster
+
+    spec = parse_cluster(cluster)
+    if spec == "local":
+        return workers
+    with open_executor(spec) as ex:
+        return max(1, int(ex.cpus() // unit_cpus))
+
+
+def run_study(
+    plan_ref: str,
+    name: str | None = None,
+    workers: int = 1,
+    progress: bool = True,
+    cluster: str | None = None,
+    unit_cpus: float = 1.0,
+) -> dict[str, Any]:
+    """Run (or resume) a study; writes its report at the end.  Returns the final status record.
+
+    ``cluster`` (``--cluster``; None: ``$NSL_CLUSTER``, else local) runs every unit as a Ray task holding
+    ``unit_cpus`` CPUs instead of ``workers`` local processes; the numbers are the same.
+    """
     if workers < 1:
         raise ConfigError(f"--workers {workers} must be at least 1")
     plan, name, units, graph = prepare(plan_ref, name)
-    status = run_planned(study_dir(name), "study", name, plan, units, graph, workers=workers, progress=progress)
+    status = run_planned(
+        study_dir(name),
+        "study",
+        name,
+        plan,
+        units,
+        graph,
+        workers=workers,
+        progress=progress,
+        cluster=cluster,
+        unit_cpus=unit_cpus,
+        bases=(plan.base,),
+    )
     write_study_report(name)
     return status
 
 
 def run_planned(
-    folder: Path, key: str, name: str, plan, units: dict, graph, *, workers: int, progress: bool
+    folder: Path,
+    key: str,
+    name: str,
+    plan,
+    units: dict,
+    graph,
+    *,
+    workers: int,
+    progress: bool,
+    cluster: str | None = None,
+    unit_cpus: float = 1.0,
+    bases: tuple[str, ...] = (),
 ) -> dict[str, Any]:
     """Run a planned unit graph in ``folder`` (a study's or a transfer's, ``key`` says which): refuse while
-    another live process runs it, save the plan and the unit list, then run (or resume) the graph."""
+    another live process runs it, save the plan and the unit list, then run (or resume) the graph.
+
+    Units never open the catalog: this process resolves the checkpoints each reads and registers what each made,
+    on a cluster as on this machine.  ``bases`` are resolved here first (the shipped base registers itself).
+    """
+    from functools import partial
+
+    from nsl.cluster import open_executor, parse_cluster
+
+    from .estimate import unit_seconds
+
+    if unit_cpus <= 0:
+        raise ConfigError(f"--unit-cpus {unit_cpus} must be positive")
+    spec = parse_cluster(cluster)
+    executor = open_executor(spec)  # without Ray, --cluster ray stops here, before anything is written
     running = read_status(folder / STATUS_FILE)
     if running.get("state") == "running" and running.get("pid") != os.getpid() and pid_alive(running.get("pid")):
         raise ConfigError(
@@ -101,15 +169,24 @@ def run_planned(
             "code_version": code_version(),
         },
     )
-    return run_graph(
-        graph,
-        folder / STATUS_FILE,
-        execute=actions.run_unit,
-        is_done=actions.is_done,
-        workers=workers,
-        progress=progress,
-        meta={key: name, "plan": plan.source, "workers": workers, "code_version": code_version()},
-    )
+    for ref in bases:
+        actions.resolve_checkpoint(ref)
+    with executor as ex:
+        where = {"workers": workers} if spec == "local" else {**ex.describe(), "unit_cpus": unit_cpus}
+        return run_graph(
+            graph,
+            folder / STATUS_FILE,
+            execute=partial(actions.run_unit, register=False),
+            is_done=actions.is_done,
+            register=actions.register_unit,
+            prepare=actions.prepare_unit,
+            cost=unit_seconds,
+            workers=workers,
+            progress=progress,
+            executor=None if spec == "local" else ex,
+            unit_cpus=unit_cpus,
+            meta={key: name, "plan": plan.source, **where, "code_version": code_version()},
+        )
 
 
 def _load(name: str) -> Plan:
@@ -150,7 +227,8 @@ def status_lines(status: dict[str, Any], kind: str = "study") -> list[str]:
             u = units[n]
             secs = "" if u.get("seconds") is None else f"{u['seconds']:.1f}s"
             err = f"  {u['error']}" if u.get("error") else ""
-            lines.append(f"  {state:<11} {secs:>8}  {n}{err}")
+            node = f"  on {u['node']}" if u.get("node") else ""
+            lines.append(f"  {state:<11} {secs:>8}  {n}{node}{err}")
     return lines
 
 

@@ -11,8 +11,11 @@ Units that already have their output cost nothing.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+import heapq
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
+
+import networkx as nx
 
 from .units import Unit
 
@@ -95,3 +98,57 @@ def estimate(units: Iterable[Unit], done: Iterable[str] = ()) -> Estimate:
             s += u.params["episodes"] * FRAMES_PER_EPISODE / IMAGE_CACHE_FRAMES_PER_S
         by_kind[u.kind] = by_kind.get(u.kind, 0.0) + s
     return Estimate(sum(by_kind.values()), by_kind, n)
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """The wall time of the units left on ``slots`` units at once, and the chain of units that bounds it."""
+
+    slots: int
+    seconds: float  # a list schedule: ready units start by critical path, as the scheduler starts them
+    critical: float  # the costliest chain of dependent units: no number of slots finishes sooner
+    path: tuple[str, ...]  # that chain, first unit first
+
+    def __str__(self) -> str:
+        return (
+            f"about {self.seconds / 60:.0f} minutes on {self.slots} unit slots (critical path "
+            f"{self.critical / 60:.0f} minutes, {len(self.path)} units)"
+        )
+
+
+def schedule(
+    graph: nx.DiGraph, slots: int, done: Iterable[str] = (), cost: Callable[[Unit], float] = unit_seconds
+) -> Schedule:
+    """Simulate the scheduler on ``slots`` slots (local workers, or cluster CPUs over the CPUs a unit holds).
+
+    Each unit's cost is :func:`unit_seconds`: one slot runs a unit as fast as this machine's ``--workers 1``
+    does (the `full` study ran at that pace with two units at once on two cores: docs/study.md).
+    """
+    from .scheduler import critical_path
+
+    if slots < 1:
+        raise ValueError(f"slots {slots} must be at least 1")
+    skip = set(done)
+    g = graph.subgraph([n for n in graph if n not in skip]).copy()
+    costs = {n: float(cost(g.nodes[n]["unit"])) for n in g}
+    rank = critical_path(g, lambda u: costs[u.name])
+    waiting = {n: g.in_degree(n) for n in g}
+    ready = [(-rank[n], n) for n in g if waiting[n] == 0]
+    heapq.heapify(ready)
+    running: list[tuple[float, str]] = []
+    now = 0.0
+    while ready or running:
+        while ready and len(running) < slots:
+            _, n = heapq.heappop(ready)
+            heapq.heappush(running, (now + costs[n], n))
+        now, n = heapq.heappop(running)
+        for s in g.successors(n):
+            waiting[s] -= 1
+            if waiting[s] == 0:
+                heapq.heappush(ready, (-rank[s], s))
+    path: list[str] = []
+    node = max(g, key=lambda n: rank[n]) if len(g) else None
+    while node is not None:
+        path.append(node)
+        node = max(g.successors(node), key=lambda n: rank[n], default=None)
+    return Schedule(slots, now, rank[path[0]] if path else 0.0, tuple(path))

@@ -31,7 +31,7 @@ from typing import Any
 from nsl.errors import ConfigError, UnknownReferenceError
 from nsl.scenes import REPORTING_SCENES, SELECTION_SCENES
 
-SHIPPED = ("tiny", "small", "full", "paper")
+SHIPPED = ("tiny", "small", "full", "full-seeds", "full-sequence", "paper")
 BASE_DATA_SOURCES = ("checkpoint", "plan")
 # Baselines that are not a fine-tuning method of their own: what each one leaves out separates a cause of the gain.
 #   scratch_target  random initialisation, trained on the target data alone (no base half)

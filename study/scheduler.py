@@ -1,17 +1,19 @@
-"""Run a unit graph with local processes, skipping finished units, and keep a status file.
+"""Run a unit graph on local processes or a Ray cluster, skipping finished units, and keep a status file.
 
 The scheduler knows nothing about what a unit does.  It is given the graph
-(:func:`nsl.study.units.unit_graph`), ``is_done(unit)`` and
-``execute(unit, inner_workers, progress)``.  It:
+(:func:`nsl.study.units.unit_graph`), ``is_done(unit)``,
+``execute(unit, inner_workers, progress)`` and optionally ``prepare(unit)``
+and ``register(unit, summary)``, which run in this process before and after
+each unit.  It:
 
 * marks every unit whose output already exists as done (so a killed study resumes where it stopped);
-* runs ready units (all dependencies done) in topological order, up to ``workers`` at a time: in this process
-  when ``workers == 1``, else each in a fresh spawned process with ``cpu_count // workers`` threads;
+* runs ready units (all dependencies done), the longest critical path first (``cost``), up to ``workers`` at a
+  time: in this process when ``workers == 1``, else each in a fresh spawned process with ``cpu_count // workers``
+  threads; or, given a Ray executor, each as a Ray task holding ``unit_cpus`` CPUs, as many as the cluster holds;
+* with ``register``, runs units in processes that may not open the catalog (``NSL_NO_CATALOG=1``), so this
+  process is the catalog's only user;
 * writes ``status.json`` (through a temporary file and a rename) after every change: each unit's state
-  (``done``, ``running``, ``left``, ``failed``) and the seconds it took.
-
-A cluster scheduler can replace this module: the graph, ``is_done`` and
-``execute`` are all it needs.
+  (``done``, ``running``, ``left``, ``failed``), the seconds it took and, on a cluster, its node.
 """
 
 from __future__ import annotations
@@ -78,9 +80,13 @@ def live_status(path: Path, key: str, name: str) -> dict[str, Any]:
     alive = pid_alive(status.get("pid"))
     if status.get("state") == "running" and not alive:
         status["state"] = "interrupted"
-    for u in status.get("units", {}).values():
+    for name, u in status.get("units", {}).items():
         if u["state"] == "running" and not alive:
             u["state"] = "interrupted"
+        if u["state"] == "running" and "node" not in u:  # on a cluster: the node its task started on
+            where = read_status(Path(path).parent / WHERE_DIR / _file_name(name))
+            if where.get("node"):
+                u["node"] = where["node"]
     return status
 
 
@@ -94,12 +100,16 @@ class _Status:
             prev = old.get(name, {})
             self.data["units"][name] = {"kind": u.kind, "state": "left", "seconds": prev.get("seconds"), "error": None}
 
-    def set(self, name: str, state: str, seconds: float | None = None, error: str | None = None) -> None:
+    def set(
+        self, name: str, state: str, seconds: float | None = None, error: str | None = None, node: str | None = None
+    ) -> None:
         rec = self.data["units"][name]
         rec["state"] = state
         if seconds is not None:
             rec["seconds"] = round(seconds, 2)
         rec["error"] = error
+        if node is not None:
+            rec["node"] = node
         self.save()
 
     def save(self, state: str | None = None) -> None:
@@ -109,17 +119,160 @@ class _Status:
         atomic_write_json(self.path, self.data)
 
 
-def _child(execute: Callable, unit: Unit, inner_workers: int, threads: int, queue) -> None:
+def critical_path(graph: nx.DiGraph, cost: Callable[[Unit], float]) -> dict[str, float]:
+    """Each unit's cost plus the costliest chain of units that wait for it: the time it keeps the study going.
+
+    Ready units start in decreasing order of it, so the long trainings at the head of a chain start first and
+    short evaluations fill the gaps.
+    """
+    rank: dict[str, float] = {}
+    for name in reversed(list(nx.topological_sort(graph))):
+        after = max((rank[s] for s in graph.successors(name)), default=0.0)
+        rank[name] = float(cost(graph.nodes[name]["unit"])) + after
+    return rank
+
+
+def _error_text(e: BaseException) -> str:
+    return str(e) if isinstance(e, NslError) else f"{type(e).__name__}: {e}"
+
+
+def _child(execute: Callable, unit: Unit, inner_workers: int, threads: int, queue, no_catalog: bool) -> None:
     """A spawned worker: one unit with a fixed thread count; reports (name, error or None, summary)."""
     import torch
 
     torch.set_num_threads(threads)
+    if no_catalog:  # the scheduler resolved what it needs and registers what it makes
+        from nsl.catalog import NO_CATALOG_ENV
+
+        os.environ[NO_CATALOG_ENV] = "1"
     try:
         out = execute(unit, inner_workers, False)
         queue.put((unit.name, None, out))
     except BaseException as e:  # noqa: BLE001  # reported to the parent, which stops the study
-        msg = str(e) if isinstance(e, NslError) else f"{type(e).__name__}: {e}\n{traceback.format_exc()}"
+        msg = _error_text(e) if isinstance(e, NslError) else f"{_error_text(e)}\n{traceback.format_exc()}"
         queue.put((unit.name, msg, None))
+
+
+def cluster_task(execute: Callable, unit: Unit, where: str | None) -> dict:
+    """A unit as a Ray task, which never opens the catalog (the driver resolves and registers), leaving a note of
+    the node it runs on."""
+    import socket
+
+    from nsl.catalog import NO_CATALOG_ENV
+
+    os.environ[NO_CATALOG_ENV] = "1"
+    node = socket.gethostname()
+    try:
+        import ray
+
+        node = f"{node}/{ray.get_runtime_context().get_node_id()[:8]}"
+    except Exception:  # noqa: BLE001  # outside a Ray worker: the host name will do
+        pass
+    if where:  # every start of the unit, in order (a task run again after its node was lost starts again)
+        starts = read_status(Path(where)).get("starts", [])
+        starts.append({"node": node, "pid": os.getpid(), "started": _now()})
+        atomic_write_json(Path(where), {"node": node, "starts": starts})
+    out = execute(unit, 1, False)
+    return {**out, "node": node}
+
+
+class _InProcess:
+    """Units one at a time in this process (``--workers 1``)."""
+
+    def __init__(self, execute: Callable, inner: int, progress: bool):
+        self.execute, self.inner, self.progress = execute, inner, progress
+        self.capacity = 1
+        self.todo: list[tuple[str, Unit]] = []
+
+    def start(self, name: str, unit: Unit) -> None:
+        self.todo.append((name, unit))
+
+    def next(self) -> tuple[str, BaseException | None, dict | None]:
+        name, unit = self.todo.pop(0)
+        try:
+            return name, None, self.execute(unit, self.inner, self.progress)
+        except Exception as e:  # noqa: BLE001  # the scheduler reports it
+            return name, e, None
+
+    def stop(self) -> None:
+        self.todo.clear()
+
+
+class _Processes:
+    """Each unit in a fresh spawned process with ``cpus // workers`` threads (``--workers W``)."""
+
+    def __init__(self, execute: Callable, workers: int, no_catalog: bool):
+        self.execute, self.no_catalog = execute, no_catalog
+        self.capacity = workers
+        self.threads = max(1, (os.cpu_count() or 1) // workers)
+        self.ctx = mp.get_context("spawn")
+        self.queue = self.ctx.Queue()
+        self.running: dict[str, Any] = {}
+
+    def start(self, name: str, unit: Unit) -> None:
+        proc = self.ctx.Process(
+            target=_child,
+            args=(self.execute, unit, 1, self.threads, self.queue, self.no_catalog),
+            name=f"nsl-study-{name}",
+        )
+        proc.start()
+        self.running[name] = proc
+
+    def next(self) -> tuple[str, BaseException | str | None, dict | None]:
+        import queue as queue_mod
+
+        while True:
+            try:
+                name, error, out = self.queue.get(timeout=1.0)
+                break
+            except queue_mod.Empty:  # a worker that died without a report (killed, crashed) counts as failed
+                dead = [n for n, p in self.running.items() if not p.is_alive() and p.exitcode not in (0, None)]
+                if dead:
+                    code = self.running[dead[0]].exitcode
+                    name, error, out = dead[0], f"worker process exited with code {code}", None
+                    break
+        self.running.pop(name).join()
+        return name, error, out
+
+    def stop(self) -> None:
+        for proc in self.running.values():
+            proc.terminate()
+            proc.join()
+        self.running.clear()
+
+
+class _Cluster:
+    """Each unit a Ray task holding ``unit_cpus`` CPUs, as many at once as the cluster has room for."""
+
+    def __init__(self, executor, execute: Callable, unit_cpus: float, where: Path | None):
+        from nsl.cluster import Unit as Task
+
+        self.ex, self.execute, self.unit_cpus, self.where = executor, execute, unit_cpus, where
+        self.Task = Task
+        self.capacity = max(1, int(executor.cpus() // unit_cpus))
+
+    def start(self, name: str, unit: Unit) -> None:
+        where = str(self.where / _file_name(name)) if self.where else None
+        self.ex.submit(self.Task(name, cluster_task, (self.execute, unit, where), num_cpus=self.unit_cpus))
+
+    def next(self) -> tuple[str, BaseException | None, dict | None]:
+        from nsl.cluster import UnitFailed as TaskFailed
+
+        try:
+            name, out = self.ex.wait()
+            return name, None, out
+        except TaskFailed as e:
+            return e.key, e.error, None
+
+    def stop(self) -> None:
+        self.ex.close()
+
+
+def _file_name(unit_name: str) -> str:
+    return unit_name.replace(":", "_").replace("/", "_")
+
+
+WHERE_DIR = "where"  # beside status.json: a file per unit started on a cluster, naming its node
 
 
 def run_graph(
@@ -131,13 +284,27 @@ def run_graph(
     workers: int = 1,
     progress: bool = True,
     meta: dict[str, Any] | None = None,
+    register: Callable[[Unit, dict], None] | None = None,
+    prepare: Callable[[Unit], Unit] | None = None,
+    cost: Callable[[Unit], float] | None = None,
+    executor=None,
+    unit_cpus: float = 1.0,
 ) -> dict[str, Any]:
-    """Run every unit not yet done; returns the final status record.  Raises UnitFailed if a unit fails."""
+    """Run every unit not yet done; returns the final status record.  Raises UnitFailed if a unit fails.
+
+    ``register(unit, summary)``, when given, runs in this process after each unit, and ``prepare(unit)`` before
+    it starts (e.g. to resolve the checkpoints it reads): worker processes and cluster tasks then never open the
+    catalog, and this process is its only user.  ``cost(unit)`` (seconds, estimated) orders the ready
+    units by their critical path.  ``executor`` (a Ray :class:`nsl.cluster.RayExecutor`) runs each unit as a Ray
+    task holding ``unit_cpus`` CPUs, instead of ``workers`` local processes.
+    """
     from nsl.progress import progress_bar
 
     if workers < 1:
         raise NslError(f"--workers {workers} must be at least 1")
     names = order(graph)
+    rank = critical_path(graph, cost) if cost is not None else {}
+    position = {n: i for i, n in enumerate(names)}
     status = _Status(status_path, graph, meta or {})
     done = set()
     for name in names:
@@ -145,8 +312,13 @@ def run_graph(
             done.add(name)
             status.data["units"][name]["state"] = "done"
     status.save()
-    cpus = os.cpu_count() or 1
-    inner = max(1, cpus // workers)
+    where = Path(status_path).parent / WHERE_DIR
+    if executor is not None:
+        pool: Any = _Cluster(executor, execute, unit_cpus, where)
+    elif workers == 1:
+        pool = _InProcess(execute, os.cpu_count() or 1, progress)
+    else:
+        pool = _Processes(execute, workers, no_catalog=register is not None)
     bar = progress_bar(
         total=len(names),
         initial=len(done),
@@ -157,87 +329,56 @@ def run_graph(
         position=0,
     )
     failed: list[str] = []
-    running: dict[str, tuple[Any, float]] = {}
-    ctx = mp.get_context("spawn")
-    queue = ctx.Queue() if workers > 1 else None
+    first_error: BaseException | None = None
+    running: dict[str, float] = {}
 
     def ready() -> list[str]:
-        return [
-            n for n in names if n not in done and n not in running and all(d in done for d in graph.predecessors(n))
-        ]
+        out = [n for n in names if n not in done and n not in running and all(d in done for d in graph.predecessors(n))]
+        return sorted(out, key=lambda n: (-rank.get(n, 0.0), position[n]))
 
     try:
         while True:
             todo = [] if failed else ready()
-            if workers == 1:
-                if not todo:
-                    break
-                name = todo[0]
+            for name in todo[: pool.capacity - len(running)]:
                 unit = graph.nodes[name]["unit"]
-                status.set(name, "running")
-                bar.set_postfix_str(name, refresh=True)
-                t0 = time.perf_counter()
-                try:
-                    execute(unit, inner, progress)
-                except Exception as e:
-                    msg = str(e) if isinstance(e, NslError) else f"{type(e).__name__}: {e}"
-                    status.set(name, "failed", time.perf_counter() - t0, msg)
-                    status.save("failed")
-                    raise UnitFailed(
-                        f"unit {name}: {msg}; fix it and run the same command again to resume "
-                        "(--debug shows the traceback)"
-                    ) from e
-                status.set(name, "done", time.perf_counter() - t0)
-                done.add(name)
-                bar.update(1)
-                continue
-            for name in todo[: workers - len(running)]:
-                unit = graph.nodes[name]["unit"]
-                proc = ctx.Process(
-                    target=_child, args=(execute, unit, 1, max(1, cpus // workers), queue), name=f"nsl-study-{name}"
-                )
-                proc.start()
-                running[name] = (proc, time.perf_counter())
+                pool.start(name, prepare(unit) if prepare is not None else unit)
+                running[name] = time.perf_counter()
                 status.set(name, "running")
             if not running:
                 break
             bar.set_postfix_str(", ".join(running), refresh=True)
-            name, error, _ = _next_result(queue, running)
-            proc, t0 = running.pop(name)
-            proc.join()
+            name, error, out = pool.next()
+            seconds = time.perf_counter() - running.pop(name)
+            if error is None and register is not None:
+                try:
+                    register(graph.nodes[name]["unit"], out or {})
+                except Exception as e:  # noqa: BLE001  # reported like the unit's own failure
+                    error = e
             if error is None:
-                status.set(name, "done", time.perf_counter() - t0)
+                status.set(name, "done", seconds, node=(out or {}).get("node"))
                 done.add(name)
                 bar.update(1)
-            else:
-                status.set(name, "failed", time.perf_counter() - t0, error.splitlines()[0] if error else "failed")
-                failed.append(f"{name}: {error}")
-    except UnitFailed:
-        raise
+                continue
+            text = error if isinstance(error, str) else _error_text(error)
+            status.set(name, "failed", seconds, text.splitlines()[0] if text else "failed")
+            failed.append(f"{name}: {text}")
+            if isinstance(error, BaseException) and first_error is None:
+                first_error = error
     except BaseException:
-        for proc, _ in running.values():
-            proc.terminate()
-            proc.join()
+        pool.stop()
         status.save("interrupted")
         raise
     finally:
         bar.close()
+    pool.stop()
     if failed:
         status.save("failed")
-        raise UnitFailed("unit " + failed[0].splitlines()[0] + "; fix it and run the same command again to resume")
+        raise UnitFailed(
+            "unit "
+            + failed[0].splitlines()[0]
+            + "; fix it and run the same command again to resume"
+            + (" (--debug shows the traceback)" if executor is None and workers == 1 else "")
+        ) from first_error
     left = [n for n in names if n not in done]
     status.save("finished" if not left else "stopped")
     return status.data
-
-
-def _next_result(queue, running: dict[str, tuple[Any, float]]):
-    """Wait for a worker's report; a worker that died without one (killed, crashed) counts as failed."""
-    import queue as queue_mod
-
-    while True:
-        try:
-            return queue.get(timeout=1.0)
-        except queue_mod.Empty:
-            for name, (proc, _) in running.items():
-                if not proc.is_alive() and proc.exitcode not in (0, None):
-                    return name, f"worker process exited with code {proc.exitcode}", None

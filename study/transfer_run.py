@@ -24,7 +24,7 @@ from . import actions
 from .driver import PLAN_FILE, run_planned
 from .scheduler import STATUS_FILE, live_status, read_status
 from .transfer import TransferPlan, build_transfer_units, ft_tag, load_transfer_plan, parse_transfer_plan, scratch_tag
-from .units import order, unit_graph
+from .units import unit_graph
 
 MATRIX_JSON = "matrix.json"
 MATRIX_MD = "matrix.md"
@@ -101,24 +101,40 @@ def prepare_transfer(plan_ref: str, name: str | None = None):
     return plan, units, unit_graph(units)
 
 
-def estimate_transfer(plan_ref: str, name: str | None = None):
-    """The estimated cost of the units not done yet (nothing runs, nothing is written)."""
-    from .estimate import estimate
+def estimate_transfer(plan_ref: str, name: str | None = None, slots: int | None = None):
+    """The estimated cost of the units not done yet (nothing runs, nothing is written); with ``slots``, also
+    the wall time with that many units at once: (cost, schedule)."""
+    from .driver import estimate_units
 
     _, units, graph = prepare_transfer(plan_ref, name)
-    done = [n for n in order(graph) if actions.is_done(units[n])]
-    return estimate([units[n] for n in order(graph)], done)
+    return estimate_units(units, graph, slots)
 
 
 def run_transfer(
-    plan_ref: str, name: str | None = None, workers: int = 1, progress: bool = True
+    plan_ref: str,
+    name: str | None = None,
+    workers: int = 1,
+    progress: bool = True,
+    cluster: str | None = None,
+    unit_cpus: float = 1.0,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
-    """Run (or resume) a transfer, then write its matrix and report: (final status record, report summary)."""
+    """Run (or resume) a transfer, then write its matrix and report: (final status record, report summary).
+
+    ``cluster`` and ``unit_cpus`` as for :func:`nsl.study.driver.run_study`."""
     if workers < 1:
         raise ConfigError(f"--workers {workers} must be at least 1")
     plan, units, graph = prepare_transfer(plan_ref, name)
     status = run_planned(
-        transfer_dir(plan.name), "transfer", plan.name, plan, units, graph, workers=workers, progress=progress
+        transfer_dir(plan.name),
+        "transfer",
+        plan.name,
+        plan,
+        units,
+        graph,
+        workers=workers,
+        progress=progress,
+        cluster=cluster,
+        unit_cpus=unit_cpus,
     )
     return status, write_transfer_report(plan.name)
 

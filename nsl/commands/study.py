@@ -6,6 +6,40 @@ import argparse
 
 from nsl.commands._options import add_json, add_parser, add_workers
 
+CLUSTER_HELP = (
+    "where units run: local processes (default, or $NSL_CLUSTER; see --workers), or each unit as a Ray task on "
+    "this machine or $RAY_ADDRESS (ray) or an existing cluster (auto, ray://...), as many at once as it has "
+    "CPUs; the catalog stays here and NSL_HOME must be shared; the same numbers (docs/scale.md)"
+)
+
+
+def add_unit_cpus(p) -> None:
+    p.add_argument(
+        "--unit-cpus",
+        type=float,
+        default=1.0,
+        help="with --cluster: CPUs each unit holds (its torch threads and simulators); default 1",
+    )
+
+
+def run_options(args: argparse.Namespace) -> dict:
+    """The options ``nsl study run`` and ``nsl transfer run`` pass on to the scheduler."""
+    return {"workers": args.workers, "progress": not args.quiet, "cluster": args.cluster, "unit_cpus": args.unit_cpus}
+
+
+def print_estimate(args: argparse.Namespace, estimate, name) -> int:
+    """``--estimate``: the units' cost on this machine, and with --workers W or --cluster their wall time."""
+    from nsl.cluster import parse_cluster
+    from nsl.study import cluster_slots
+
+    label = name or args.plan
+    print(f"{label}: {estimate(args.plan, name)} on a quiet 2-core machine, --workers 1")
+    if args.workers > 1 or parse_cluster(args.cluster) != "local":
+        slots = cluster_slots(args.cluster, args.workers, args.unit_cpus)
+        _, sched = estimate(args.plan, name, slots)
+        print(f"{label}: {sched}")
+    return 0
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = add_parser(
@@ -30,11 +64,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="units run at once, each in its own process (1: one unit at a time, using every core; "
         "results are reproducible for the same --workers)",
     )
+    from nsl.cluster import add_option
+
+    add_option(r, help=CLUSTER_HELP)
+    add_unit_cpus(r)
     r.add_argument("--quiet", action="store_true", help="no progress bars")
     r.add_argument(
         "--estimate",
         action="store_true",
-        help="check the plan and print the estimated time of the units left, then stop",
+        help="check the plan and print the estimated time of the units left, then stop (with --workers W or "
+        "--cluster: also the wall time with W units, or the cluster's CPUs, at once)",
     )
     r.set_defaults(func=_run)
     s = add_parser(ss, "status", help="units done, running and left, with the time spent")
@@ -51,11 +90,8 @@ def _run(args: argparse.Namespace) -> int:
     from nsl.study import estimate_study, run_study, status_lines, study_dir
 
     if args.estimate:
-        print(
-            f"{args.name or args.plan}: {estimate_study(args.plan, args.name)} on a quiet 2-core machine, --workers 1"
-        )
-        return 0
-    status = run_study(args.plan, args.name, workers=args.workers, progress=not args.quiet)
+        return print_estimate(args, estimate_study, args.name)
+    status = run_study(args.plan, args.name, **run_options(args))
     print("\n".join(status_lines(status)[:1]))
     print(f"report: {study_dir(status['study']) / 'report.md'}")
     return 0

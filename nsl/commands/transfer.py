@@ -28,11 +28,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("plan", help="a shipped transfer plan (tiny, small) or a path to a TOML plan")
     r.add_argument("--name", default=None, help="transfer name (default: the plan's name; it prefixes checkpoints)")
     add_workers(r, help="units run at once, each in its own process (1: one unit at a time, using every core)")
+    from nsl.cluster import add_option
+
+    from .study import CLUSTER_HELP, add_unit_cpus
+
+    add_option(r, help=CLUSTER_HELP)
+    add_unit_cpus(r)
     r.add_argument("--quiet", action="store_true", help="no progress bars")
     r.add_argument(
         "--estimate",
         action="store_true",
-        help="check the plan and the workspace, print the estimated time of the units left, then stop",
+        help="check the plan and the workspace, print the estimated time of the units left, then stop (with "
+        "--workers W or --cluster: also the wall time with W units, or the cluster's CPUs, at once)",
     )
     r.set_defaults(func=_run)
     s = add_parser(ss, "status", help="units done, running and left, with the time spent")
@@ -94,13 +101,11 @@ def _summary(out: dict) -> list[str]:
 def _run(args: argparse.Namespace) -> int:
     from nsl.study import estimate_transfer, run_transfer, status_lines
 
+    from .study import print_estimate, run_options
+
     if args.estimate:
-        print(
-            f"{args.name or args.plan}: {estimate_transfer(args.plan, args.name)} on a quiet 2-core machine, "
-            "--workers 1"
-        )
-        return 0
-    status, report = run_transfer(args.plan, args.name, workers=args.workers, progress=not args.quiet)
+        return print_estimate(args, estimate_transfer, args.name)
+    status, report = run_transfer(args.plan, args.name, **run_options(args))
     print("\n".join(status_lines(status, "transfer")[:1]))
     print("\n".join(_summary(report)))
     return 0

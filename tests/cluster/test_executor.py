@@ -56,6 +56,10 @@ def test_without_ray_cluster_commands_fail_in_one_line_saying_how_to_install(mon
     monkeypatch.setenv("NSL_CLUSTER", "auto")
     assert run_cli("eval", "--policy", "random", "--episodes", "2") == 2
     assert capsys.readouterr().err.strip().startswith("nsl: error: --cluster auto needs Ray")
+    assert run_cli("study", "run", "tiny", "--quiet") == 2  # the study's units too, before any of them runs
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("nsl: error: --cluster auto needs Ray") and len(err.splitlines()) == 1
+    assert not (workspace.home() / "studies" / "tiny" / "status.json").exists()
     # local stays the default and needs no Ray
     monkeypatch.delenv("NSL_CLUSTER")
     assert run_cli(*COLLECT) == 0
@@ -123,6 +127,16 @@ def test_units_run_as_ray_tasks_on_both_nodes_and_need_the_shared_workspace(ray_
             UnitFailed,
             match=r"unit train failed: NSL_HOME .* of the driver is not visible on node "
             r".*; mount the same shared folder",
+        ):
+            ex.wait()
+
+    with open_executor("ray") as ex:  # a node that runs another nsl than the driver refuses
+        ex.code_version = "0.0.1+gdeadbeefcafe"
+        ex.submit(Unit("train", _square, (2,)))
+        with pytest.raises(
+            UnitFailed,
+            match=r"unit train failed: node .* runs nsl .*, but the driver runs 0.0.1\+gdeadbeefcafe; install the "
+            r"same nsl on every node",
         ):
             ex.wait()
 

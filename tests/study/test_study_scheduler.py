@@ -95,3 +95,79 @@ def test_two_workers_run_independent_units_at_once_in_their_own_processes(tmp_pa
     a, b = (float(starts[n][0]) for n in ("collect_a", "collect_b"))
     ta = float((tmp_path / "train_x.start").read_text().split()[0])
     assert ta > max(a, b)  # and the training waited for both
+
+
+def _cost(unit: Unit) -> float:
+    return float(unit.params["cost"])
+
+
+def _chain_graph(tmp_path):
+    """A long chain (train a -> train b -> eval b) beside two short independent evaluations."""
+    p = {"dir": str(tmp_path)}
+    return unit_graph(
+        [
+            Unit("eval:short1", "eval", {**p, "cost": 1}),
+            Unit("eval:short2", "eval", {**p, "cost": 1}),
+            Unit("train:a", "train", {**p, "cost": 10}),
+            Unit("train:b", "train", {**p, "cost": 10}, ("train:a",)),
+            Unit("eval:b", "eval", {**p, "cost": 1}, ("train:b",)),
+        ]
+    )
+
+
+def test_ready_units_start_by_critical_path_and_the_schedule_model_agrees(tmp_path):
+    from nsl.study.estimate import schedule
+    from nsl.study.scheduler import critical_path
+
+    g = _chain_graph(tmp_path)
+    rank = critical_path(g, _cost)
+    assert rank == {"train:a": 21.0, "train:b": 11.0, "eval:b": 1.0, "eval:short1": 1.0, "eval:short2": 1.0}
+    started = []
+
+    def record(unit: Unit, inner_workers: int, progress: bool) -> dict:
+        started.append(unit.name)
+        return touch_unit(unit, inner_workers, progress)
+
+    run_graph(g, tmp_path / "status.json", execute=record, is_done=done, cost=_cost, progress=False)
+    assert started[0] == "train:a"  # the head of the longest chain first, although listed after the evaluations
+    one, two = schedule(g, 1, cost=_cost), schedule(g, 2, cost=_cost)
+    assert one.seconds == 23.0 and two.seconds == 21.0  # two slots: the short units fit beside the chain
+    assert two.critical == 21.0 and two.path == ("train:a", "train:b", "eval:b")
+    assert schedule(g, 2, done=["train:a"], cost=_cost).seconds == 11.0  # finished units cost nothing
+
+
+def test_with_a_registrar_units_run_without_the_catalog_and_the_scheduler_registers(tmp_path):
+    """Worker processes get NSL_NO_CATALOG=1; register() runs in the scheduler's process after each unit."""
+    from nsl.catalog import NO_CATALOG_ENV
+
+    registered = []
+
+    def register(unit: Unit, summary: dict) -> None:
+        assert os.environ.get(NO_CATALOG_ENV) != "1"
+        registered.append((unit.name, summary["no_catalog"]))
+
+    def prepare(unit: Unit) -> Unit:
+        return Unit(unit.name, unit.kind, {**unit.params, "prepared": True}, unit.deps)
+
+    run_graph(
+        _graph(tmp_path),
+        tmp_path / "status.json",
+        execute=catalog_free_unit,
+        is_done=done,
+        register=register,
+        prepare=prepare,
+        workers=2,
+        progress=False,
+    )
+    assert sorted(registered) == sorted((n, "1") for n in ("collect:a", "collect:b", "train:x", "eval:x", "eval:b"))
+
+
+def catalog_free_unit(unit: Unit, inner_workers: int, progress: bool) -> dict:
+    from nsl.catalog import NO_CATALOG_ENV, Catalog
+    from nsl.errors import ConfigError
+
+    assert unit.params["prepared"]
+    with pytest.raises(ConfigError, match=r"this process may not open the catalog .*open it on the driver"):
+        Catalog()
+    touch_unit(unit, inner_workers, progress)
+    return {"no_catalog": os.environ.get(NO_CATALOG_ENV)}

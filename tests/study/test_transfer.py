@@ -111,8 +111,10 @@ def test_running_again_resumes_nothing_and_keeps_the_matrix(xmini, mini_run, tmp
     status = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert status["state"] == "finished" and all(u["state"] == "done" for u in status["units"].values())
     # under another name every training unit is left (the collected data is shared); nothing is written
-    assert run_cli("transfer", "run", str(path), "--name", "xest", "--estimate") == 0
-    assert "for 4 units (train " in capsys.readouterr().out
+    assert run_cli("transfer", "run", str(path), "--name", "xest", "--estimate", "--workers", "2") == 0
+    out = capsys.readouterr().out
+    assert "for 4 units (train " in out
+    assert re.search(r"xest: about \d+ minutes on 2 unit slots \(critical path \d+ minutes, \d+ units\)", out)
     assert not (mini_run / "transfers" / "xest").exists()
     other = tmp_path / "other.toml"
     other.write_text(MINI_TRANSFER.replace("steps = 4", "steps = 6"))
