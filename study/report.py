@@ -105,6 +105,29 @@ def seed_mean(items: Sequence[Mapping | None]) -> tuple[float, float] | None:
     return mean, float(stats.t.ppf(0.975, len(rates) - 1)) * sd / math.sqrt(len(rates))
 
 
+def mean_gain_over_seeds(records: Mapping[str, Any], tier: str) -> tuple[float, float, int] | None:
+    """The mean gain over the plan's shifts (tier ``tier`` minus the base policy) as (mean over seeds, half-width
+    of its 95% t interval, seeds): each seed's five-shift mean is one sample.  None with fewer than two seeds
+    measured on every shift."""
+    bp = records["base_policy"]
+    per_seed: list[list[float]] = []
+    for shift, row in records["finetune"].items():
+        b0 = count(bp.get(shift))
+        cs = [count(d) for d in row["tiers"].get(tier, [])]
+        if b0 is None or len(cs) < 2 or any(c is None for c in cs):
+            return None
+        per_seed.append([c.rate - b0.rate for c in cs])  # type: ignore[union-attr]
+    k = min(len(g) for g in per_seed) if per_seed else 0
+    if k < 2:
+        return None
+    from scipy import stats
+
+    means = [sum(g[i] for g in per_seed) / len(per_seed) for i in range(k)]
+    m = sum(means) / k
+    sd = math.sqrt(sum((x - m) ** 2 for x in means) / (k - 1))
+    return m, float(stats.t.ppf(0.975, k - 1)) * sd / math.sqrt(k), k
+
+
 def seeds_cell(items: Sequence[Mapping | None]) -> str:
     """A cell over training seeds: the seed mean with its t interval, then the pooled Wilson interval."""
     c = pooled(items)
@@ -524,6 +547,14 @@ class Finding:
         return {True: "holds", False: "fails", None: "not measured"}[self.holds]
 
 
+def _over_seeds(records: Mapping[str, Any], tier: str) -> str:
+    g = mean_gain_over_seeds(records, tier)
+    if g is None:
+        return ""
+    m, half, k = g
+    return f" [{100 * (m - half):+.1f}, {100 * (m + half):+.1f}] (mean over {k} seeds {100 * m:+.1f}, 95% t interval)"
+
+
 def findings(records: Mapping[str, Any]) -> list[Finding]:
     """Findings (a)-(e) on our numbers beside the study's, shift by shift in the plan's order."""
     plan = records["plan"]
@@ -574,7 +605,8 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
             f"{len(ref.CHALLENGE)} shifts)",
             holds_b,
             (
-                f"mean {100 * sum(gains) / len(gains):+.0f} points ({'; '.join(parts)}); reaches the base policy's "
+                f"mean {100 * sum(gains) / len(gains):+.0f} points{_over_seeds(records, top)} ({'; '.join(parts)}); "
+                "reaches the base policy's "
                 f"base-task success on {len(reached)} of {n}"
                 + (f" ({', '.join(map(_pretty, reached))})" if reached else "")
             )

@@ -302,3 +302,19 @@ def test_cells_with_outcomes_on_the_same_scenes_get_the_paired_interval():
     # one cell without outcomes, or scenes that do not line up: the independent interval
     assert diff_interval(Count(70, 100), base)[1:] == (lo_ind, hi_ind)
     assert diff_interval(Count(70, 100, "1" * 70 + "0" * 30), Count(50, 80, "1" * 50 + "0" * 30))[1] < lo
+
+
+def test_finding_b_gives_the_mean_gain_over_seeds_with_its_t_interval():
+    from nsl.study.report import mean_gain_over_seeds
+
+    rec = records()
+    assert mean_gain_over_seeds(rec, "8") is None  # one seed: no interval over seeds
+    assert " seeds " not in {x.key: x for x in findings(rec)}["b"].ours
+    # harsh 20% -> 70, 60, 80 (gains 50, 40, 60); offset 75% -> 85, 85, 75 (gains 10, 10, 0)
+    rec["finetune"]["harsh_lighting"]["tiers"]["8"] = [c(70), c(60), c(80)]
+    rec["finetune"]["offset_gripper"]["tiers"]["8"] = [c(85), c(85), c(75)]
+    m, half, k = mean_gain_over_seeds(rec, "8")
+    # per seed five-shift means 30, 25, 30 -> mean 28.3, sd 2.89, t(2) 4.303: half-width 7.17 points
+    assert k == 3 and m == pytest.approx(0.2833, abs=1e-4) and half == pytest.approx(0.0717, abs=1e-4)
+    b = {x.key: x for x in findings(rec)}["b"]
+    assert b.ours.startswith("mean +28 points [+21.2, +35.5] (mean over 3 seeds +28.3, 95% t interval) (harsh")
