@@ -6,6 +6,7 @@ take a ``runner`` instead)::
     open_executor, parse_cluster, add_option   # --cluster local|ray|auto|ray://HOST:PORT
     Executor, RayExecutor, Unit, UnitFailed    # executor.runner; submit/wait/run_units
     RayChunkRunner                             # collect_episodes(..., runner=...) on Ray
+    store.Store, store.parse_store             # --store URL: NSL_HOME's folders between nodes without a shared FS
 
 Ray is an optional extra (``pip install 'nsl[ray]'``); it is imported only when
 a Ray executor is made.  See docs/scale.md.

@@ -147,9 +147,16 @@ class Executor:
 class RayExecutor(Executor):
     """A Ray cluster: chunks and units become Ray tasks, retried elsewhere when a node is lost."""
 
-    def __init__(self, spec: str = "ray", init_kwargs: dict[str, Any] | None = None, max_retries: int = 5):
+    def __init__(
+        self,
+        spec: str = "ray",
+        init_kwargs: dict[str, Any] | None = None,
+        max_retries: int = 5,
+        store: str | None = None,
+    ):
         super().__init__()
         self.name = spec
+        self.store = store  # a URL: nodes keep their own NSL_HOME and units move folders through it (.store)
         if spec == "ray":
             self.address = os.environ.get("RAY_ADDRESS") or None  # None: start an instance here
         else:
@@ -212,7 +219,15 @@ class RayExecutor(Executor):
         task = _remote(ray, _call_unit)
         ref = task.options(
             num_cpus=unit.num_cpus, max_retries=self.max_retries, retry_exceptions=False, name=f"nsl-unit:{unit.key}"
-        ).remote(unit.fn, unit.args, unit.kwargs, str(self._shared_marker()), unit.num_cpus, self.code_version)
+        ).remote(
+            unit.fn,
+            unit.args,
+            unit.kwargs,
+            None if self.store else str(self._shared_marker()),
+            unit.num_cpus,
+            self.code_version,
+            self.store,
+        )
         self._pending[ref] = unit.key
 
     @property
@@ -253,15 +268,33 @@ class RayExecutor(Executor):
             self._started = False
 
 
-def open_executor(value: str | None = None, **init_kwargs) -> Executor:
-    """The executor for ``--cluster VALUE`` (else ``$NSL_CLUSTER``, else local); use it as a context manager."""
+def open_executor(value: str | None = None, store: str | None = None, **init_kwargs) -> Executor:
+    """The executor for ``--cluster VALUE`` (else ``$NSL_CLUSTER``, else local); use it as a context manager.
+
+    ``store`` (a URL, :mod:`.store`): the nodes share no ``NSL_HOME``; each unit runs in its node's own.
+    """
     spec = parse_cluster(value)
-    return Executor() if spec == "local" else RayExecutor(spec, init_kwargs)
+    if spec == "local":
+        if store:
+            raise ConfigError(
+                f"--store {store} moves folders between cluster nodes; give --cluster too (local units share "
+                "this machine's NSL_HOME)"
+            )
+        return Executor()
+    return RayExecutor(spec, init_kwargs, store=store)
 
 
-def _call_unit(fn, args: tuple, kwargs: dict, marker: str, num_cpus: float, driver_version: str | None = None):
-    """A unit inside a Ray task: check the nsl version and the shared workspace, point NSL_HOME at it, run with
-    its CPUs' threads."""
+def _call_unit(
+    fn,
+    args: tuple,
+    kwargs: dict,
+    marker: str | None,
+    num_cpus: float,
+    driver_version: str | None = None,
+    store: str | None = None,
+):
+    """A unit inside a Ray task: check the nsl version and the shared workspace (or, with a store, use the node's
+    own), point NSL_HOME at it, run with its CPUs' threads."""
     import socket
     import sys
 
@@ -272,13 +305,22 @@ def _call_unit(fn, args: tuple, kwargs: dict, marker: str, num_cpus: float, driv
             f"node {socket.gethostname()} runs nsl {code_version()}, but the driver runs {driver_version}; install "
             "the same nsl on every node (docs/scale.md)"
         )
-    path = Path(marker)
-    if not path.is_file():
-        raise EnvironmentSetupError(
-            f"NSL_HOME {path.parent.parent} of the driver is not visible on node {socket.gethostname()}; mount the "
-            "same shared folder at that path on every node (docs/scale.md)"
-        )
-    os.environ["NSL_HOME"] = str(path.parent.parent)
+    if store is not None:
+        import ray
+
+        from .store import node_home
+
+        home = node_home(store, ray.get_runtime_context().get_node_id()[:12])
+        home.mkdir(parents=True, exist_ok=True)
+        os.environ["NSL_HOME"] = str(home)
+    else:
+        path = Path(str(marker))
+        if not path.is_file():
+            raise EnvironmentSetupError(
+                f"NSL_HOME {path.parent.parent} of the driver is not visible on node {socket.gethostname()}; mount "
+                "the same shared folder at that path on every node, or give --store URL (docs/scale.md)"
+            )
+        os.environ["NSL_HOME"] = str(path.parent.parent)
     torch = sys.modules.get("torch")
     if torch is not None:  # Ray gives a worker one thread; a unit gets one per CPU it holds
         torch.set_num_threads(max(1, int(num_cpus)))

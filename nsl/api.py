@@ -215,14 +215,18 @@ def study_run(
     progress: bool = True,
     cluster: str | None = None,
     unit_cpus: float = 1.0,
+    store: str | None = None,
 ) -> StudyRun:
     """Run (or resume) a study plan (``tiny``, ``small``, ``full``, ``paper`` or a TOML path) and write its report.
 
     ``cluster`` (``ray``, ``auto``, ``ray://HOST:PORT``; None: ``$NSL_CLUSTER``, else local) runs every unit as a
-    Ray task holding ``unit_cpus`` CPUs (docs/scale.md)."""
+    Ray task holding ``unit_cpus`` CPUs; ``store`` (an fsspec URL; None: ``$NSL_STORE``) is for nodes that share
+    no ``NSL_HOME`` (docs/scale.md)."""
     from nsl.study import run_study, study_dir
 
-    status = run_study(plan, name, workers=workers, progress=progress, cluster=cluster, unit_cpus=unit_cpus)
+    status = run_study(
+        plan, name, workers=workers, progress=progress, cluster=cluster, unit_cpus=unit_cpus, store=store
+    )
     folder = study_dir(status["study"])
     return StudyRun(status["study"], folder, folder / "report.md", status)
 
@@ -249,13 +253,16 @@ def transfer_run(
     progress: bool = True,
     cluster: str | None = None,
     unit_cpus: float = 1.0,
+    store: str | None = None,
 ) -> StudyRun:
     """Measure a transfer-advantage matrix (``nsl transfer run``); the report holds matrix.json and matrix.md.
 
-    ``cluster`` and ``unit_cpus`` as for :func:`study_run`."""
+    ``cluster``, ``unit_cpus`` and ``store`` as for :func:`study_run`."""
     from nsl.study import run_transfer
 
-    status, report = run_transfer(plan, name, workers=workers, progress=progress, cluster=cluster, unit_cpus=unit_cpus)
+    status, report = run_transfer(
+        plan, name, workers=workers, progress=progress, cluster=cluster, unit_cpus=unit_cpus, store=store
+    )
     folder = Path(report["matrix"]).parent
     return StudyRun(folder.name, folder, Path(report["report"]), {**status, "report": report})
 

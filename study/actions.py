@@ -340,7 +340,10 @@ def _train(unit: Unit, workers: int, progress: bool, register: bool = True) -> d
     result = train(
         options,
         progress=progress,
-        record={"argv": ["nsl", "study", "unit", unit.name], "unit": {k: v for k, v in p.items() if k != "pinned"}},
+        record={
+            "argv": ["nsl", "study", "unit", unit.name],
+            "unit": {k: v for k, v in p.items() if k not in ("pinned", "store")},
+        },
         offline=bool(m.get("holdout")),
         stop=False,
         source="study curve",
@@ -365,3 +368,89 @@ def _evaluate(unit: Unit, workers: int, progress: bool, register: bool = True) -
     )
     (r,) = result.table[p["checkpoint_ref"]].values()
     return {"successes": r.successes, "episodes": r.episodes, **({} if register else {"made": result})}
+
+
+# --- a cluster without a shared file system (--store) -----------------------------------------------------------------
+
+
+def unit_trees(unit: Unit) -> dict[str, str]:
+    """The folders of ``NSL_HOME`` a prepared unit reads, relative to it: every version of the datasets it
+    collects into or trains on, and its pinned checkpoints (``{what: folder}``)."""
+    from nsl import workspace
+    from nsl.cluster.store import relative
+    from nsl.datasets import api
+
+    p, home = unit.params, workspace.home()
+    names = []
+    if unit.kind == "collect":
+        names = [p["dataset"]]
+    elif unit.kind == "train":
+        names = [b["dataset"] for b in p["base"]] + ([p["target"]["dataset"]] if p.get("target") else [])
+    trees = {}
+    for name in names:
+        for ref in _versions_with_hash(name, None):
+            trees[ref] = relative(api.open_version(ref).root, home, f"dataset {ref}")
+    for ref, entry in (p.get("pinned") or {}).items():
+        trees[ref] = relative(entry.path, home, f"checkpoint {ref}")
+    return trees
+
+
+def stage_unit(unit: Unit, store: str) -> Unit:
+    """:func:`prepare_unit`, then push the folders the unit reads to the store (what the store lacks) and
+    name them in ``params["store"]``.  Runs on the driver before the unit starts."""
+    from dataclasses import replace
+
+    from nsl import workspace
+    from nsl.cluster.store import Store
+
+    unit = prepare_unit(unit)
+    trees, s, home = unit_trees(unit), Store(store), workspace.home()
+    for rel in dict.fromkeys(trees.values()):
+        s.push(home, rel)
+    return replace(unit, params={**unit.params, "store": {"url": store, "trees": trees}})
+
+
+def run_staged_unit(unit: Unit, workers: int = 1, progress: bool = True) -> dict[str, Any]:
+    """:func:`run_unit` on a node with its own ``NSL_HOME``: pull the unit's folders from the store, run it
+    (``register=False``), push the folders it made.  The summary names them (``trees``) for the driver, and its
+    ``made`` holds paths relative to ``NSL_HOME``."""
+    from dataclasses import replace
+
+    from nsl import workspace
+    from nsl.cluster.store import Store, relative
+
+    p, home = unit.params, workspace.home()
+    staged = p["store"]
+    s = Store(staged["url"])
+    for rel in dict.fromkeys(staged["trees"].values()):
+        s.pull(home, rel)
+    pinned = {r: replace(e, path=str(home / staged["trees"][r])) for r, e in (p.get("pinned") or {}).items()}
+    out = run_unit(replace(unit, params={**p, "pinned": pinned}), workers, progress, register=False)
+    made, trees = out.get("made"), []
+    if unit.kind == "collect" and made is not None:
+        from nsl.datasets import api
+
+        trees = [relative(api.open_version(made).root, home, f"dataset {made}")]
+    elif unit.kind == "train" and made is not None:
+        trees = [relative(made.run_dir, home, f"run {made.name}")]
+        made = replace(made, run_dir=Path(trees[0]), final=Path(relative(made.final, home, f"run {made.name}")))
+    for rel in trees:
+        s.push(home, rel)
+    return {**out, "made": made, "trees": trees}
+
+
+def register_staged_unit(unit: Unit, summary: Mapping[str, Any], store: str) -> None:
+    """:func:`register_unit` on the driver for a unit run by :func:`run_staged_unit`: pull the folders it made
+    into this ``NSL_HOME`` first."""
+    from dataclasses import replace
+
+    from nsl import workspace
+    from nsl.cluster.store import Store
+
+    s, home = Store(store), workspace.home()
+    for rel in summary.get("trees") or []:
+        s.pull(home, rel)
+    made = summary.get("made")
+    if unit.kind == "train" and made is not None:
+        made = replace(made, run_dir=home / made.run_dir, final=home / made.final)
+    register_unit(unit, {**summary, "made": made})

@@ -95,11 +95,13 @@ def run_study(
     progress: bool = True,
     cluster: str | None = None,
     unit_cpus: float = 1.0,
+    store: str | None = None,
 ) -> dict[str, Any]:
     """Run (or resume) a study; writes its report at the end.  Returns the final status record.
 
     ``cluster`` (``--cluster``; None: ``$NSL_CLUSTER``, else local) runs every unit as a Ray task holding
-    ``unit_cpus`` CPUs instead of ``workers`` local processes; the numbers are the same.
+    ``unit_cpus`` CPUs instead of ``workers`` local processes; the numbers are the same.  ``store`` (``--store``,
+    an fsspec URL; None: ``$NSL_STORE``, else a shared ``NSL_HOME``) moves the units' folders through it.
     """
     if workers < 1:
         raise ConfigError(f"--workers {workers} must be at least 1")
@@ -115,6 +117,7 @@ def run_study(
         progress=progress,
         cluster=cluster,
         unit_cpus=unit_cpus,
+        store=store,
         bases=(plan.base,),
     )
     write_study_report(name)
@@ -133,6 +136,7 @@ def run_planned(
     progress: bool,
     cluster: str | None = None,
     unit_cpus: float = 1.0,
+    store: str | None = None,
     bases: tuple[str, ...] = (),
 ) -> dict[str, Any]:
     """Run a planned unit graph in ``folder`` (a study's or a transfer's, ``key`` says which): refuse while
@@ -144,13 +148,14 @@ def run_planned(
     from functools import partial
 
     from nsl.cluster import open_executor, parse_cluster
+    from nsl.cluster.store import parse_store
 
     from .estimate import unit_seconds
 
     if unit_cpus <= 0:
         raise ConfigError(f"--unit-cpus {unit_cpus} must be positive")
-    spec = parse_cluster(cluster)
-    executor = open_executor(spec)  # without Ray, --cluster ray stops here, before anything is written
+    spec, store = parse_cluster(cluster), parse_store(store)
+    executor = open_executor(spec, store=store)  # without Ray, --cluster ray stops here, before anything is written
     running = read_status(folder / STATUS_FILE)
     if running.get("state") == "running" and running.get("pid") != os.getpid() and pid_alive(running.get("pid")):
         raise ConfigError(
@@ -173,13 +178,20 @@ def run_planned(
         actions.resolve_checkpoint(ref)
     with executor as ex:
         where = {"workers": workers} if spec == "local" else {**ex.describe(), "unit_cpus": unit_cpus}
+        if store:  # no shared NSL_HOME: units pull what they read from the store and push what they make
+            where["store"] = store
+            execute, prepare = actions.run_staged_unit, partial(actions.stage_unit, store=store)
+            register = partial(actions.register_staged_unit, store=store)
+        else:
+            execute, prepare = partial(actions.run_unit, register=False), actions.prepare_unit
+            register = actions.register_unit
         return run_graph(
             graph,
             folder / STATUS_FILE,
-            execute=partial(actions.run_unit, register=False),
+            execute=execute,
             is_done=actions.is_done,
-            register=actions.register_unit,
-            prepare=actions.prepare_unit,
+            register=register,
+            prepare=prepare,
             cost=unit_seconds,
             workers=workers,
             progress=progress,

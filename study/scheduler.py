@@ -312,7 +312,8 @@ def run_graph(
             done.add(name)
             status.data["units"][name]["state"] = "done"
     status.save()
-    where = Path(status_path).parent / WHERE_DIR
+    # a unit task notes where it runs beside status.json, which a node without the shared NSL_HOME (--store) cannot
+    where = None if getattr(executor, "store", None) else Path(status_path).parent / WHERE_DIR
     if executor is not None:
         pool: Any = _Cluster(executor, execute, unit_cpus, where)
     elif workers == 1:

@@ -117,10 +117,11 @@ def run_transfer(
     progress: bool = True,
     cluster: str | None = None,
     unit_cpus: float = 1.0,
+    store: str | None = None,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Run (or resume) a transfer, then write its matrix and report: (final status record, report summary).
 
-    ``cluster`` and ``unit_cpus`` as for :func:`nsl.study.driver.run_study`."""
+    ``cluster``, ``unit_cpus`` and ``store`` as for :func:`nsl.study.driver.run_study`."""
     if workers < 1:
         raise ConfigError(f"--workers {workers} must be at least 1")
     plan, units, graph = prepare_transfer(plan_ref, name)
@@ -135,6 +136,7 @@ def run_transfer(
         progress=progress,
         cluster=cluster,
         unit_cpus=unit_cpus,
+        store=store,
     )
     return status, write_transfer_report(plan.name)
 

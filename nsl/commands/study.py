@@ -9,7 +9,7 @@ from nsl.commands._options import add_json, add_parser, add_workers
 CLUSTER_HELP = (
     "where units run: local processes (default, or $NSL_CLUSTER; see --workers), or each unit as a Ray task on "
     "this machine or $RAY_ADDRESS (ray) or an existing cluster (auto, ray://...), as many at once as it has "
-    "CPUs; the catalog stays here and NSL_HOME must be shared; the same numbers (docs/scale.md)"
+    "CPUs; the catalog stays here and NSL_HOME is shared (or see --store); the same numbers (docs/scale.md)"
 )
 
 
@@ -20,11 +20,25 @@ def add_unit_cpus(p) -> None:
         default=1.0,
         help="with --cluster: CPUs each unit holds (its torch threads and simulators); default 1",
     )
+    p.add_argument(
+        "--store",
+        default=None,
+        metavar="URL",
+        help="with --cluster, when the nodes share no NSL_HOME: an fsspec URL (s3://bucket/prefix, ...; or "
+        "$NSL_STORE) through which each unit pulls the folders it reads, checked by sha256 into its node's "
+        "cache, and pushes what it makes; credentials as for nsl push (docs/scale.md)",
+    )
 
 
 def run_options(args: argparse.Namespace) -> dict:
     """The options ``nsl study run`` and ``nsl transfer run`` pass on to the scheduler."""
-    return {"workers": args.workers, "progress": not args.quiet, "cluster": args.cluster, "unit_cpus": args.unit_cpus}
+    return {
+        "workers": args.workers,
+        "progress": not args.quiet,
+        "cluster": args.cluster,
+        "unit_cpus": args.unit_cpus,
+        "store": args.store,
+    }
 
 
 def print_estimate(args: argparse.Namespace, estimate, name) -> int:

@@ -21,11 +21,10 @@ from tests.study.test_study_run import _differences, _numbers
 ROOT = Path(__file__).resolve().parents[2]
 
 
-@pytest.fixture
-def cluster(monkeypatch):
+def _start_cluster():
     """A head node without CPUs (it only schedules) and two worker nodes of STUDY_THREADS CPUs each, so that a
-    unit holding STUDY_THREADS CPUs computes with the local run's thread count; this process connected."""
-    import ray
+    unit holding STUDY_THREADS CPUs computes with the local run's thread count.  Nodes take this process's
+    environment as it is now."""
     from ray.cluster_utils import Cluster
 
     c = Cluster(
@@ -41,8 +40,38 @@ def cluster(monkeypatch):
     try:
         nodes = [c.add_node(num_cpus=STUDY_THREADS, object_store_memory=NODE_MEMORY) for _ in range(2)]
         c.wait_for_nodes()
+    except BaseException:
+        c.shutdown()
+        raise
+    return c, nodes
+
+
+@pytest.fixture
+def cluster(monkeypatch):
+    """The cluster of :func:`_start_cluster`, this process connected."""
+    import ray
+
+    c, nodes = _start_cluster()
+    try:
         monkeypatch.setenv("RAY_ADDRESS", c.address)
         yield c, nodes
+    finally:
+        ray.shutdown()
+        c.shutdown()
+
+
+@pytest.fixture
+def store_cluster(s3, s3_server, monkeypatch, tmp_path):
+    """The cluster, with the S3 store's endpoint and credentials in its nodes' environment (as a real cluster's
+    nodes have them) and each node's own NSL_HOME under ``tmp_path/nodes``; yields the bucket's URL."""
+    import ray
+
+    monkeypatch.setenv("FSSPEC_S3", json.dumps({"client_kwargs": {"endpoint_url": s3_server.endpoint}}))
+    monkeypatch.setenv("NSL_STORE_CACHE", str(tmp_path / "nodes"))
+    c, _ = _start_cluster()
+    try:
+        monkeypatch.setenv("RAY_ADDRESS", c.address)
+        yield s3
     finally:
         ray.shutdown()
         c.shutdown()
@@ -151,3 +180,30 @@ def test_a_killed_driver_resumes_and_runs_no_finished_unit_again(mini_run, mini_
     assert all(len(starts[name[n]]) == 1 for n in done_before)  # finished units were skipped
     assert len(starts) == n_units and max(len(s) for s in starts.values()) <= 2  # killed mid-way: started again once
     assert _differences(_numbers(home), _numbers(mini_run)) == []
+
+
+def test_mini_study_through_an_s3_store_with_no_shared_nsl_home(
+    mini_run, mini_plan, tmp_path, monkeypatch, store_cluster
+):
+    """Each node works in its own NSL_HOME: it pulls what a unit reads from S3 (checked by sha256) and pushes what
+    the unit made, which the driver pulls and registers.  The numbers are the local run's."""
+    from nsl.study import run_study
+
+    home = tmp_path / "driver"
+    monkeypatch.setenv("NSL_HOME", str(home))
+    url = f"{store_cluster}/mini"
+    status = run_study(str(mini_plan), progress=False, cluster="ray", unit_cpus=STUDY_THREADS, store=url)
+    assert status["state"] == "finished" and status["store"] == url
+    assert _differences(_numbers(home), _numbers(mini_run)) == []
+    nodes = [p for p in (tmp_path / "nodes").glob("*/*") if p.is_dir()]
+    assert len(nodes) == 2  # both worker nodes ran units, each in its own NSL_HOME
+    assert not (home / ".cluster").exists() and not (home / "studies" / "mini" / "where").exists()
+    assert not any((n / "catalog.sqlite").exists() for n in nodes)  # the catalog is the driver's alone
+    made = {p.name for n in nodes for p in (n / "runs").iterdir()}
+    assert made and made == {p.name for p in (home / "runs").iterdir()}  # every run was made on a node
+    base = home / "datasets" / "mini-base-oracle" / "v1"  # collected on a node, pulled here, then by the others
+    assert all(
+        (n / base.relative_to(home) / "manifest.json").read_bytes() == (base / "manifest.json").read_bytes()
+        for n in nodes
+        if (n / "runs").is_dir() and any((n / "runs").iterdir())
+    )
