@@ -6,14 +6,24 @@ take a ``runner`` instead)::
     open_executor, parse_cluster, add_option   # --cluster local|ray|auto|ray://HOST:PORT
     Executor, RayExecutor, Unit, UnitFailed    # executor.runner; submit/wait/run_units
     RayChunkRunner                             # collect_episodes(..., runner=...) on Ray
-    store.Store, store.parse_store             # --store URL: NSL_HOME's folders between nodes without a shared FS
+    node_home                                  # --store: a node's own NSL_HOME (the folders move via nsl.share.store)
 
 Ray is an optional extra (``pip install 'nsl[ray]'``); it is imported only when
 a Ray executor is made.  See docs/scale.md.
 """
 
 from .collect import RayChunkRunner
-from .executor import CLUSTER_ENV, Executor, RayExecutor, Unit, UnitFailed, add_option, open_executor, parse_cluster
+from .executor import (
+    CLUSTER_ENV,
+    Executor,
+    RayExecutor,
+    Unit,
+    UnitFailed,
+    add_option,
+    node_home,
+    open_executor,
+    parse_cluster,
+)
 
 __all__ = [
     "CLUSTER_ENV",
@@ -23,6 +33,7 @@ __all__ = [
     "Unit",
     "UnitFailed",
     "add_option",
+    "node_home",
     "open_executor",
     "parse_cluster",
 ]

@@ -42,6 +42,7 @@ CLUSTER_ENV = "NSL_CLUSTER"
 INSTALL_HINT = "install it with `pip install 'nsl[ray]'` (in a checkout: `pip install -e '.[ray]'`)"
 LOOPBACK_ENV = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"  # "0": a Ray instance started here binds 127.0.0.1 only
 MARKER_DIR = ".cluster"  # under NSL_HOME: a file per driver, proving to a task that it sees the same NSL_HOME
+STORE_CACHE_ENV = "NSL_STORE_CACHE"  # with --store: where nodes keep their own NSL_HOME (default ~/.cache/nsl/store)
 
 
 def parse_cluster(value: str | None) -> str:
@@ -156,7 +157,7 @@ class RayExecutor(Executor):
     ):
         super().__init__()
         self.name = spec
-        self.store = store  # a URL: nodes keep their own NSL_HOME and units move folders through it (.store)
+        self.store = store  # a URL: nodes keep their own NSL_HOME (node_home), units move folders via nsl.share.store
         if spec == "ray":
             self.address = os.environ.get("RAY_ADDRESS") or None  # None: start an instance here
         else:
@@ -284,6 +285,15 @@ def open_executor(value: str | None = None, store: str | None = None, **init_kwa
     return RayExecutor(spec, init_kwargs, store=store)
 
 
+def node_home(store: str, node: str) -> Path:
+    """The ``NSL_HOME`` a node keeps for the store URL ``store`` (``--store``, :mod:`nsl.share.store`): its cache
+    of pulled folders and its units' outputs."""
+    import hashlib
+
+    base = Path(os.environ.get(STORE_CACHE_ENV) or Path.home() / ".cache" / "nsl" / "store").expanduser()
+    return base / hashlib.sha256(store.encode()).hexdigest()[:12] / node
+
+
 def _call_unit(
     fn,
     args: tuple,
@@ -307,8 +317,6 @@ def _call_unit(
         )
     if store is not None:
         import ray
-
-        from .store import node_home
 
         home = node_home(store, ray.get_runtime_context().get_node_id()[:12])
         home.mkdir(parents=True, exist_ok=True)

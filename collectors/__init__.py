@@ -5,8 +5,9 @@ reach into the modules)::
 
     EnvConfig, GraspEnv, ENV_VERSION            # the task
     SHIFT_NAMES, ShiftSpec, parse_shift, parse_shift_list   # the shift suite
+    ShiftDef, register_shift, shift_names       # plugin shifts (also nsl.shifts entry points)
     STUDY_SEVERITIES, STUDY_SHIFTS              # the five at the severities calibrated to ckpt:base
-    Policy, scripted_policy                     # random, oracle[:NOISE]
+    Policy, scripted_policy, register_policy    # random, oracle[:NOISE], plugins' PACKAGE.NAME[:ARGS]
     Episode, episode_seeds, run_episodes, make_envs, collect_episodes
     render_gallery                              # `nsl render`
     GYM_ID                                      # gymnasium.make(GYM_ID, shift="harsh_lighting")
@@ -35,14 +36,17 @@ _EXPORTS = {
     "env": ("ACTION_DIM", "CONTROL_MODES", "ENV_VERSION", "STATE_DIM", "EnvConfig", "GraspEnv"),
     "gallery": ("render_gallery",),
     "parallel": ("collect_episodes",),
-    "policies": ("Policy", "scripted_policy"),
+    "policies": ("Policy", "register_policy", "scripted_policy"),
     "rollout": ("Episode", "episode_seeds", "make_envs", "run_episodes"),
     "shifts": (
         "SHIFT_NAMES",
         "SHIFTS",
         "STUDY_SEVERITIES",
         "STUDY_SHIFTS",
+        "ShiftDef",
         "ShiftSpec",
+        "register_shift",
+        "shift_names",
         "parse_shift",
         "parse_shift_list",
     ),

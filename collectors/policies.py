@@ -12,7 +12,8 @@ to policies whose ``needs_privileged`` is true (the scripted oracle).  A
 learned policy (a checkpoint's CEM policy from ``nsl.learners``) has the same
 call signature and is passed in by the caller.
 
-On the command line: ``random`` and ``oracle[:NOISE]``.
+On the command line: ``random`` and ``oracle[:NOISE]``, and a plugin's ``PACKAGE.NAME[:ARGS]``
+(an ``nsl.policies`` entry point, or :func:`register_policy`; docs/extending.md).
 """
 
 from __future__ import annotations
@@ -142,10 +143,64 @@ class OraclePolicy:
 
 
 SCRIPTED = {"random": RandomPolicy, "oracle": OraclePolicy}
+_REGISTERED: dict[str, tuple[Any, dict[str, str]]] = {}  # plugin policies registered in this process
+
+
+def register_policy(name: str, factory, plugin: dict[str, str] | None = None) -> None:
+    """Add a collection policy ``--policy NAME[:ARGS]`` for this process; ``NAME`` is ``PACKAGE.NAME``.
+
+    ``factory(args, *, control, move_step, yaw_step)`` returns a :class:`Policy` (``args``: the text after the
+    colon, or "").  Packages declare theirs as ``nsl.policies`` entry points instead (docs/extending.md).
+    """
+    if "." not in name or name.startswith(("ckpt", ".")) or not callable(factory):
+        raise ConfigError(
+            f"policy name {name!r}: a plugin policy is named PACKAGE.NAME and registered with a callable "
+            "factory(args, *, control, move_step, yaw_step)"
+        )
+    _REGISTERED[name] = (factory, plugin or {"package": "__main__", "version": "0"})
+
+
+class PluginPolicy:
+    """A plugin's policy, whose description records the plugin's package and version."""
+
+    def __init__(self, inner: Any, ref: str, plugin: dict[str, str]):
+        self.inner, self.ref, self.plugin = inner, ref, plugin
+        self.name = ref.partition(":")[0]
+        self.needs_privileged = bool(getattr(inner, "needs_privileged", False))
+
+    def __call__(self, obs, *, rngs, privileged=None):
+        return self.inner(obs, rngs=rngs, privileged=privileged)
+
+    def describe(self) -> dict[str, Any]:
+        inner = self.inner.describe() if hasattr(self.inner, "describe") else {}
+        return {"policy": self.ref, **inner, "plugin": dict(self.plugin)}
+
+
+def _plugin_policy(ref: str, control: str, move_step: float, yaw_step: float) -> Policy | None:
+    name, _, arg = ref.partition(":")
+    if "." not in name:
+        return None
+    if name not in _REGISTERED:
+        from nsl import plugins
+
+        found = plugins.load("nsl.policies", name)
+        if found is None:
+            raise unknown(
+                "policy",
+                ref,
+                [*SCRIPTED, *_REGISTERED, *plugins.names("nsl.policies")],
+                "a plugin policy is PACKAGE.NAME from an installed package's nsl.policies entry points",
+            )
+        _REGISTERED[name] = found
+    factory, plugin = _REGISTERED[name]
+    return PluginPolicy(factory(arg, control=control, move_step=move_step, yaw_step=yaw_step), ref, plugin)
 
 
 def scripted_policy(ref: str, control: str = "auto_descent", move_step: float = 0.03, yaw_step: float = 0.35) -> Policy:
-    """Build a scripted policy from ``random`` or ``oracle[:NOISE]``."""
+    """Build a scripted policy from ``random``, ``oracle[:NOISE]`` or a plugin's ``PACKAGE.NAME[:ARGS]``."""
+    plugin = _plugin_policy(ref, control, move_step, yaw_step)
+    if plugin is not None:
+        return plugin
     name, _, arg = ref.partition(":")
     if name not in SCRIPTED:
         raise unknown(

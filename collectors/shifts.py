@@ -38,6 +38,7 @@ class ShiftDef:
     params: Callable[[float], dict[str, float]]  # severity -> physical parameters
     apply: Callable[[mujoco.MjSpec, dict[str, float]], None]
     doc: str
+    plugin: dict[str, str] | None = None  # the package and version of a plugin shift (None: built into nsl)
 
 
 def _harsh_lighting_params(s: float) -> dict[str, float]:
@@ -185,7 +186,53 @@ SHIFTS: dict[str, ShiftDef] = {
         ),
     ]
 }
-SHIFT_NAMES = (BASE, *SHIFTS)
+SHIFT_NAMES = (BASE, *SHIFTS)  # the built-in shifts (``--shift all``); plugins add theirs (shift_names())
+_BUILT_IN = frozenset(SHIFTS)
+
+
+def register_shift(shift: ShiftDef, plugin: dict[str, str] | None = None) -> ShiftDef:
+    """Add a shift (a :class:`ShiftDef`: a name, a severity range and an edit of the ``MjSpec``) for this process.
+
+    Packages declare theirs as ``nsl.shifts`` entry points instead, which every process finds (docs/extending.md).
+    ``plugin`` (package and version) is recorded with everything made under the shift.
+    """
+    if not isinstance(shift, ShiftDef):
+        raise ConfigError(f"register_shift takes a nsl.collectors.ShiftDef, not {type(shift).__name__}")
+    if shift.name in _BUILT_IN or shift.name == BASE or not shift.name.isidentifier():
+        raise ConfigError(
+            f"shift name {shift.name!r} is taken or is not an identifier; choose another (built in: "
+            f"{', '.join(SHIFT_NAMES)})"
+        )
+    if not shift.max_severity > 0:
+        raise ConfigError(f"shift {shift.name!r}: max_severity {shift.max_severity!r} must be positive")
+    if plugin is not None or shift.plugin is None:
+        from dataclasses import replace
+
+        shift = replace(shift, plugin=plugin or {"package": "__main__", "version": "0"})
+    SHIFTS[shift.name] = shift
+    return shift
+
+
+def shift_def(name: str) -> ShiftDef:
+    """The shift registered as ``name``: built in, registered in this process, or an installed package's
+    ``nsl.shifts`` entry point."""
+    if name not in SHIFTS:
+        from nsl import plugins
+
+        found = plugins.load("nsl.shifts", name)
+        if found is not None:
+            register_shift(found[0], plugin=found[1])
+    if name not in SHIFTS:
+        raise unknown("shift", name, shift_names(), "run `nsl render --help` for the list")
+    return SHIFTS[name]
+
+
+def shift_names() -> tuple[str, ...]:
+    """Every shift name: the built-in ones, then those registered here or installed as plugins."""
+    from nsl import plugins
+
+    return (*SHIFT_NAMES, *sorted((set(SHIFTS) - _BUILT_IN) | set(plugins.names("nsl.shifts"))))
+
 
 # The study's five challenges as this suite measures them: each shift at the severity whose cost to the shipped
 # base (ckpt:base) is closest to the study's drop in Table 5.1, within 15 points of it and at least 10
@@ -209,9 +256,7 @@ class Shift:
     severity: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.name not in SHIFTS:
-            raise unknown("shift", self.name, SHIFT_NAMES, "run `nsl render --help` for the list")
-        d = SHIFTS[self.name]
+        d = shift_def(self.name)
         if not (isinstance(self.severity, (int, float)) and 0.0 <= self.severity <= d.max_severity):
             raise ConfigError(
                 f"severity {self.severity!r} for shift {self.name!r} is out of range; "
@@ -226,7 +271,9 @@ class Shift:
         SHIFTS[self.name].apply(spec, self.params)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "severity": float(self.severity), "params": self.params}
+        d: dict[str, Any] = {"name": self.name, "severity": float(self.severity), "params": self.params}
+        plugin = SHIFTS[self.name].plugin
+        return d if plugin is None else {**d, "plugin": dict(plugin)}
 
 
 @dataclass(frozen=True)
@@ -259,6 +306,9 @@ class ShiftSpec:
                 f"shift spec version {v!r} is not supported (this nsl reads version {SHIFT_SPEC_VERSION}); "
                 "upgrade nsl or re-create the dataset"
             )
+        from nsl import plugins
+
+        plugins.require(plugins.recorded(d), f"shift {d.get('name')!r}")
         return cls(tuple(Shift(s["name"], float(s["severity"])) for s in d["shifts"]))
 
     @classmethod
@@ -276,7 +326,7 @@ def parse_shift(text: str, severity: float | None = None) -> ShiftSpec:
     """
     text = (text or "").strip()
     if not text:
-        raise ConfigError("empty shift name; use one of " + ", ".join(SHIFT_NAMES))
+        raise ConfigError("empty shift name; use one of " + ", ".join(shift_names()))
     parts = []
     for token in text.split("+"):
         name, _, sev = token.strip().partition("@")

@@ -131,6 +131,9 @@ class DatasetVersion:
             raise CorruptDataError(
                 f"file {self.root / layout.NSL_META_PATH} is missing or damaged; run `nsl dataset verify`"
             ) from None
+        from nsl import plugins
+
+        plugins.require(plugins.recorded(self.provenance), f"dataset {self.ref}")  # made with a plugin shift/policy
 
     @property
     def ref(self) -> str:

@@ -16,6 +16,7 @@ and metadata, and the CLI (``nsl push``, ``nsl pull``) wires it to the rest::
     push_checkpoint(folder, dest=..., card=..., checkpoint=..., lineage=...)   -> PushResult
     pull(src, staging_root)                                          -> Pulled
     dataset_card(...), parse_remote(url)
+    store.Store(url).push(home, rel) / .pull(home, rel)              # study units' folders (--store)
 """
 
 from .cards import dataset_card

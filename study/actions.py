@@ -377,8 +377,8 @@ def unit_trees(unit: Unit) -> dict[str, str]:
     """The folders of ``NSL_HOME`` a prepared unit reads, relative to it: every version of the datasets it
     collects into or trains on, and its pinned checkpoints (``{what: folder}``)."""
     from nsl import workspace
-    from nsl.cluster.store import relative
     from nsl.datasets import api
+    from nsl.share.store import relative
 
     p, home = unit.params, workspace.home()
     names = []
@@ -401,7 +401,7 @@ def stage_unit(unit: Unit, store: str) -> Unit:
     from dataclasses import replace
 
     from nsl import workspace
-    from nsl.cluster.store import Store
+    from nsl.share.store import Store
 
     unit = prepare_unit(unit)
     trees, s, home = unit_trees(unit), Store(store), workspace.home()
@@ -417,7 +417,7 @@ def run_staged_unit(unit: Unit, workers: int = 1, progress: bool = True) -> dict
     from dataclasses import replace
 
     from nsl import workspace
-    from nsl.cluster.store import Store, relative
+    from nsl.share.store import Store, relative
 
     p, home = unit.params, workspace.home()
     staged = p["store"]
@@ -445,7 +445,7 @@ def register_staged_unit(unit: Unit, summary: Mapping[str, Any], store: str) -> 
     from dataclasses import replace
 
     from nsl import workspace
-    from nsl.cluster.store import Store
+    from nsl.share.store import Store
 
     s, home = Store(store), workspace.home()
     for rel in summary.get("trees") or []:

@@ -148,7 +148,7 @@ def run_planned(
     from functools import partial
 
     from nsl.cluster import open_executor, parse_cluster
-    from nsl.cluster.store import parse_store
+    from nsl.share.store import parse_store
 
     from .estimate import unit_seconds
 

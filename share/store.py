@@ -2,10 +2,11 @@
 
 The driver's ``NSL_HOME`` stays the record of truth.  Before a unit runs, the driver pushes the folders it reads
 (dataset versions, checkpoint folders); the unit's node pulls them into its own ``NSL_HOME`` (a per-node cache,
-:func:`node_home`), runs, and pushes the folders it made (a dataset version, a training run), which the driver
-pulls before it registers them.  A folder travels as a *tree*: its files under ``URL/home/REL/`` and, written
-last, ``URL/trees/REL.json`` with every file's size and sha256.  A pull checks every byte against it, writes each
-file under a temporary name and renames it, and skips a tree its node already holds unchanged.
+``nsl.cluster.node_home``), runs, and pushes the folders it made (a dataset version, a training run), which the
+driver pulls before it registers them (``nsl.study``).  A folder travels as a *tree*: its files under
+``URL/home/REL/`` and, written last, ``URL/trees/REL.json`` with every file's size and sha256.  A pull checks every
+byte against it, writes each file under a temporary name and renames it, and skips a tree its node already holds
+unchanged.
 
 Any fsspec URL works (``s3://bucket/prefix``, ``gs://``, ``file:///shared``); credentials and endpoints come
 from fsspec's own configuration, as for ``nsl push``.
@@ -23,7 +24,6 @@ from pathlib import Path
 from nsl.errors import ConfigError, CorruptDataError, UnknownReferenceError
 
 STORE_ENV = "NSL_STORE"
-CACHE_ENV = "NSL_STORE_CACHE"  # where a node keeps its NSL_HOME (default: ~/.cache/nsl/store)
 FILES = "home"  # URL/home/REL/...: a tree's files
 TREES = "trees"  # URL/trees/REL.json: a tree's manifest
 RECORD_DIR = ".store"  # under a node's (or the driver's) NSL_HOME: the manifests of the trees it holds
@@ -42,12 +42,6 @@ def parse_store(value: str | None) -> str | None:
     return url.rstrip("/")
 
 
-def node_home(url: str, node: str) -> Path:
-    """The ``NSL_HOME`` a node keeps for the store ``url``: its cache of pulled trees and its units' outputs."""
-    base = Path(os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "nsl" / "store").expanduser()
-    return base / hashlib.sha256(url.encode()).hexdigest()[:12] / node
-
-
 def _safe(rel: str) -> str:
     parts = rel.split("/")
     if not rel or rel.startswith("/") or any(p in ("", ".", "..") for p in parts):
@@ -56,7 +50,7 @@ def _safe(rel: str) -> str:
 
 
 def _sha256(path: Path) -> str:
-    from nsl.share.transfer import sha256_file
+    from .transfer import sha256_file
 
     return sha256_file(path)
 
@@ -73,8 +67,8 @@ class Store:
     """Trees of ``NSL_HOME`` folders on one fsspec URL."""
 
     def __init__(self, url: str):
-        from nsl.share.fsremote import FsRemote
-        from nsl.share.remotes import parse_remote
+        from .fsremote import FsRemote
+        from .remotes import parse_remote
 
         self.url = url
         self.remote = FsRemote(parse_remote(url))

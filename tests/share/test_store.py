@@ -19,7 +19,7 @@ FILES = {"data/chunk-000/file-000.parquet": b"x" * 5000, "meta/info.json": b"{}"
 
 
 def test_a_pushed_folder_pulls_into_another_home_byte_for_byte_and_a_second_time_moves_nothing(s3, s3_server, tmp_path):
-    from nsl.cluster.store import Store
+    from nsl.share.store import Store
 
     driver, node = tmp_path / "driver", tmp_path / "node"
     _folder(driver / "datasets/d/v1", FILES)
@@ -37,7 +37,7 @@ def test_a_pushed_folder_pulls_into_another_home_byte_for_byte_and_a_second_time
 def test_a_damaged_object_or_a_missing_folder_is_refused_in_one_line(s3, tmp_path):
     import fsspec
 
-    from nsl.cluster.store import Store
+    from nsl.share.store import Store
 
     driver, node = tmp_path / "driver", tmp_path / "node"
     _folder(driver / "runs/r", {"final/model.safetensors": b"w" * 100})
@@ -55,7 +55,7 @@ def test_a_damaged_object_or_a_missing_folder_is_refused_in_one_line(s3, tmp_pat
 
 def test_store_options_are_checked():
     from nsl.cluster import open_executor
-    from nsl.cluster.store import parse_store
+    from nsl.share.store import parse_store
 
     with pytest.raises(ConfigError, match=r"--store 'bucket/x' is not a URL"):
         parse_store("bucket/x")
