@@ -230,6 +230,13 @@ def gather(plan: Plan, study: str, evaluation, read_curve_file) -> dict[str, Any
             s: over_seeds([train_tag("ft", s, c.episodes, c.steps, seed) for seed in c.seeds], s) for s in c.sequence
         }
         out["continual"] = {"tasks": tasks, "stages": ["base policy", *c.sequence], "cells": stages, "single": single}
+        if len(c.seeds) > 1:  # each seed's own sequence, for the seed means and their t intervals
+            out["continual"]["seeds"] = [
+                [[ev(tags[i], t) for t in tasks] for i in range(len(c.sequence))] for tags in per_seed
+            ]
+            out["continual"]["single_seeds"] = {
+                s: [ev(train_tag("ft", s, c.episodes, c.steps, seed), s) for seed in c.seeds] for s in c.sequence
+            }
     if plan.curves is not None:
         cv = plan.curves
         curves = {}
@@ -377,13 +384,17 @@ def continual_table(records: Mapping[str, Any]) -> str:
         single = count(c["single"].get(task))
         final = count(cells[T][j]) if T >= 1 else None
         study_task = ref.study_shift(task)
+        seeds = c.get("seeds")  # several seeds: the seed mean with its t interval, then the pooled interval
+        own_cell = seeds_cell([q[i - 1][j] for q in seeds]) if seeds and own is not None else own and own.pct()
+        final_cell = seeds_cell([q[T - 1][j] for q in seeds]) if seeds and final is not None else final and final.pct()
+        single_cell = seeds_cell(c["single_seeds"][task]) if seeds and single is not None else single and single.pct()
         cols = [
             _pretty(task),
-            "-" if own is None else own.pct(),
+            own_cell or "-",
             "-" if own is None or base is None else points(own, base),
-            "-" if single is None else single.pct(),
+            single_cell or "-",
             "-" if own is None or single is None else points(own, single),
-            "-" if final is None else final.pct(),
+            final_cell or "-",
             f"{ref.CONTINUAL.get(study_task, '-')}%",
             f"{ref.CONTINUAL_VS_SINGLE.get(study_task, 0):+d}",
         ]
@@ -644,6 +655,18 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
             d = diff_interval(b0, bT)
             holds_d = d[0] <= 0.05 + 1e-12
             ours_d = f"base task {b0.pct()} before, {bT.pct()} after the last stage: lost {points(b0, bT)} points"
+            seeds = records["continual"].get("seeds")
+            lost = [b0.rate - count(q[-1][0]).rate for q in seeds or [] if count(q[-1][0]) is not None]
+            if len(lost) > 1 and len(lost) == len(seeds or []):
+                from scipy import stats
+
+                mean = sum(lost) / len(lost)
+                sd = math.sqrt(sum((x - mean) ** 2 for x in lost) / (len(lost) - 1))
+                half = float(stats.t.ppf(0.975, len(lost) - 1)) * sd / math.sqrt(len(lost))
+                ours_d += (
+                    f" (mean over {len(lost)} seeds {100 * mean:+.1f} [{100 * (mean - half):+.1f}, "
+                    f"{100 * (mean + half):+.1f}], 95% t interval)"
+                )
     out.append(
         Finding(
             "d",

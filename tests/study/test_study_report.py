@@ -318,3 +318,27 @@ def test_finding_b_gives_the_mean_gain_over_seeds_with_its_t_interval():
     assert k == 3 and m == pytest.approx(0.2833, abs=1e-4) and half == pytest.approx(0.0717, abs=1e-4)
     b = {x.key: x for x in findings(rec)}["b"]
     assert b.ours.startswith("mean +28 points [+21.2, +35.5] (mean over 3 seeds +28.3, 95% t interval) (harsh")
+
+
+def test_the_continual_sequence_with_seeds_gives_seed_means_and_finding_d_their_t_interval():
+    rec = records()
+    # three sequences: each seed's stages on (base, harsh, offset); the pooled cells are their sums
+    seeds = [
+        [[c(78), c(70), c(70)], [c(72), c(66), c(84)]],
+        [[c(80), c(60), c(72)], [c(80), c(64), c(80)]],
+        [[c(76), c(80), c(68)], [c(76), c(68), c(88)]],
+    ]
+    rec["continual"]["seeds"] = seeds
+    rec["continual"]["single_seeds"] = {"harsh_lighting": [c(70), c(72), c(68)], "offset_gripper": [c(80)] * 3}
+    rec["continual"]["cells"] = [
+        [c(240, 300), c(60, 300), c(225, 300)],
+        [c(234, 300), c(210, 300), c(210, 300)],
+        [c(228, 300), c(198, 300), c(252, 300)],
+    ]
+    rec["base_policy"]["base"] = c(240, 300)
+    rows = continual_table(rec).splitlines()
+    # harsh lighting's own stage: 70, 60, 80 -> 70% ±25; its final: 66, 64, 68 -> 66% ±5
+    assert rows[2].startswith("| harsh lighting | 70% ±25 (pooled [") and "| 66% ±5 (pooled [" in rows[2]
+    d = {x.key: x for x in findings(rec)}["d"]
+    # the base task: 80% before; after the last stage 72, 80, 76 -> lost 8, 0, 4: mean 4.0, t half-width 9.9
+    assert d.holds is True and "(mean over 3 seeds +4.0 [-5.9, +13.9], 95% t interval)" in d.ours
