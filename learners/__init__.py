@@ -12,6 +12,7 @@ Public surface (other folders import these from ``nsl.learners`` only)::
     Sampler, ArraySampler                              # the data contract and an in-memory sampler
     Checkpoint, load_checkpoint, save_checkpoint, checkpoint_config, checkpoint_id, read_config
     CEMPolicy, load_policy                             # a checkpoint acting in the collectors
+    layer_distances                                    # where a fine-tune changed the weights (Fig. 5.8)
 
 Each name loads its module on first use, so ``from nsl.learners import TrainConfig``
 loads no PyTorch.  The learner knows no simulator: it never imports ``nsl.collectors`` or ``nsl.eval``.
@@ -44,6 +45,7 @@ _EXPORTS = {
     "qtopt": ("Learner", "bellman_target", "update"),
     "sampler": ("ArraySampler", "Sampler", "synthetic_sampler"),
     "training": ("FINAL_DIR", "TrainResult", "inherited_settings", "train"),
+    "weight_change": ("layer_distances",),
 }
 __all__, __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 

@@ -267,11 +267,18 @@ def _fine_tune_recipe(plan: Plan, name: str) -> dict[str, Any] | None:
     return {k: training.get(k) for k in ("steps", "lr", "n_step", "augment_crop", "conservative")}
 
 
+def _checkpoint_folder(ref: str) -> Path | None:
+    try:
+        return Path(actions.resolve_checkpoint(ref).path)
+    except UnknownReferenceError:
+        return None
+
+
 def write_study_report(name: str) -> Path:
     """Write records.json, the plots and report.md under the study's folder; returns report.md's path."""
     plan = _load(name)
     folder = study_dir(name)
-    records = gather(plan, name, actions.evaluation, _read_curve)
+    records = gather(plan, name, actions.evaluation, _read_curve, _checkpoint_folder)
     records["recipe"] = _fine_tune_recipe(plan, name)
     workspace.atomic_write_json(folder / RECORDS_FILE, records)
     figures = {}

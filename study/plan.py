@@ -86,6 +86,8 @@ class Finetune:
     tier_seeds: tuple[int, ...] | None = None  # training seeds of the lower tiers (None: the same as seeds)
     baselines: tuple[str, ...] = ("scratch", "new_head")  # trained at the top tier: methods, or STUDY_BASELINES
     cross_shift: bool = False  # evaluate the top tier's fine-tunes on every other shift too (forgetting of shifts)
+    base_task: bool = False  # also fine-tune on base-task episodes the base collects (Table 5.2's validation row),
+    # the measure of where the weights change (Fig. 5.8)
 
     def seeds_of(self, tier: int) -> tuple[int, ...]:
         """The training seeds of a tier."""

@@ -173,9 +173,10 @@ def _pretty(shift: str) -> str:
 # --- gathering the records ------------------------------------------------------------------------------------------
 
 
-def gather(plan: Plan, study: str, evaluation, read_curve_file) -> dict[str, Any]:
+def gather(plan: Plan, study: str, evaluation, read_curve_file, checkpoint=None) -> dict[str, Any]:
     """The study's raw numbers from its outputs: ``evaluation(ref, shift, episodes, seed)`` -> catalog entry or
-    None; ``read_curve_file(checkpoint_name)`` -> list of CurveRow or None."""
+    None; ``read_curve_file(checkpoint_name)`` -> list of CurveRow or None; ``checkpoint(ref)`` -> a checkpoint's
+    folder or None (for the weight changes)."""
     e = plan.eval
 
     def ev(policy: str, shift: str) -> dict | None:
@@ -214,6 +215,12 @@ def gather(plan: Plan, study: str, evaluation, read_curve_file) -> dict[str, Any
             row["cross_shift"] = {other: [ev(t, other) for t in tags] for other in shifts}
         tiers[shift] = row
     out["finetune"] = tiers
+    if f.base_task:  # Table 5.2's validation row, and the normaliser of Fig. 5.8
+        out["base_task"] = {
+            str(k): [ev(train_tag("ft", "base", k, f.steps, s), "base") for s in f.seeds_of(k)] for k in f.tiers
+        }
+        if checkpoint is not None:
+            out["weight_change"] = weight_changes(plan, study, checkpoint)
     if plan.continual is not None:
         c = plan.continual
         tasks = ["base", *c.sequence]
@@ -345,6 +352,61 @@ def study_base_row_note() -> str:
         + ") is a fine-tune on base-task data, not its shift fine-tunes evaluated on the base task, "
         "so it is not comparable to this table."
     )
+
+
+def weight_changes(plan: Plan, study: str, checkpoint) -> dict[str, dict[str, float]] | None:
+    """Fig. 5.8: ``{shift: {layer: distance}}``, the cosine distance per layer between the base and its top-tier
+    fine-tune on each shift (seed mean), divided by that of the fine-tune on the base task; None until all exist."""
+    from nsl.learners import layer_distances
+
+    f = plan.finetune
+    top = f.tiers[-1]
+    base = checkpoint(plan.base)
+    if base is None:
+        return None
+    raw: dict[str, dict[str, float]] = {}
+    for shift in ["base", *plan.shifts]:
+        paths = [checkpoint(f"ckpt:{study}-{train_tag('ft', shift, top, f.steps, s)}@latest") for s in f.seeds]
+        if any(p is None for p in paths):
+            return None
+        per_seed = [layer_distances(base, p) for p in paths]
+        raw[shift] = {k: sum(d[k] for d in per_seed) / len(per_seed) for k in per_seed[0]}
+    norm = raw.pop("base")
+    return {s: {k: (v / norm[k] if norm[k] > 0 else float("nan")) for k, v in d.items()} for s, d in raw.items()}
+
+
+def weight_change_table(records: Mapping[str, Any]) -> str:
+    """Fig. 5.8 as a table: rows are layers, columns the shifts."""
+    wc = records.get("weight_change")
+    if not wc:
+        return "(no weight changes yet: they need every top-tier fine-tune and the base-task fine-tune)"
+    shifts = list(wc)
+    layers = list(next(iter(wc.values())))
+    lines = ["| layer | " + " | ".join(_pretty(s) for s in shifts) + " |", "|---|" + "---|" * len(shifts)]
+    for layer in layers:
+        lines.append(f"| {layer} | " + " | ".join(f"{wc[s][layer]:.2f}" for s in shifts) + " |")
+    return "\n".join(lines)
+
+
+def base_task_tiers_table(records: Mapping[str, Any]) -> str:
+    """Table 5.2's base-task row: the base fine-tuned on base-task episodes it collected, beside the study's."""
+    bt = records.get("base_task")
+    if not bt:
+        return "(no base-task fine-tunes: set finetune.base_task = true)"
+    tiers = list(bt)
+    b = count(records["base_policy"].get("base"))
+    head = ["", "base policy", *tiers]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines.append(
+        "| ours | " + ("-" if b is None else b.pct()) + " | " + " | ".join(seeds_cell(bt[t]) for t in tiers) + " |"
+    )
+    study = ref.FINETUNE["base"]
+    lines.append(
+        f"| study | {study['base']}% | "
+        + " | ".join(f"{study[int(t)]}%" if int(t) in study else "-" for t in tiers)
+        + " |"
+    )
+    return "\n".join(lines)
 
 
 def continual_matrix(records: Mapping[str, Any]) -> PerformanceMatrix | None:
@@ -977,6 +1039,23 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
             "The top tier's fine-tunes on every shift (change against the base policy on that shift; seeds pooled):",
             "",
             cross_shift_table(records),
+            "",
+        ]
+    if plan["finetune"].get("base_task"):
+        parts += [
+            "The base fine-tuned on base-task episodes it collected (Table 5.2's validation row), success on the "
+            "base task:",
+            "",
+            base_task_tiers_table(records),
+            "",
+            "## Where the weights change (Fig. 5.8)",
+            "",
+            f"Cosine distance between the base's weights and its {plan['finetune']['tiers'][-1]}-episode fine-tune's, "
+            "layer by layer (seed mean), divided by the same distance for the fine-tune on the base task: 1 is as "
+            "much change as learning more of the base task itself, more is change the shift asks for. In the "
+            "study every shift, even the morphological ones, changed the convolutional layers.",
+            "",
+            weight_change_table(records),
             "",
         ]
     if plan.get("continual"):

@@ -249,6 +249,20 @@ class _Builder:
                     )
                     self.evaluate(tag, shift)
                     self.evaluate(tag, "base")
+        if f.base_task:  # Table 5.2's validation row: the base fine-tuned on its own base-task episodes
+            for k in f.tiers:
+                for seed in f.seeds_of(k):
+                    tag = train_tag("ft", "base", k, f.steps, seed)
+                    self.train(
+                        tag,
+                        "base",
+                        self.target_data("base", k),
+                        method="ft",
+                        init=BASE_POLICY,
+                        steps=f.steps,
+                        seed=seed,
+                    )
+                    self.evaluate(tag, "base")
         if "no_target" in f.baselines:
             for seed in f.seeds:
                 tag = no_target_tag(f.steps, seed)

@@ -36,6 +36,7 @@ steps = 10
 seeds = [0]
 baselines = ["scratch", "scratch_target", "no_target"]
 cross_shift = true
+base_task = true
 
 [continual]
 sequence = ["harsh_lighting", "offset_gripper"]

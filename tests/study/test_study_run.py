@@ -11,6 +11,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from nsl.catalog import Catalog
 from nsl.datasets import api
 from nsl.study.report import findings
@@ -76,6 +78,21 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
     v = api.open_version("mini-harsh-lighting-by-base")
     spec = v.provenance["collections"][-1]["spec"]
     assert v.num_episodes == 8 and spec["policy_ref"] == "ckpt:base" and spec["policy"]["epsilon"] == 0.1
+    # Table 5.2's base-task row: the base fine-tuned on 8 base-task episodes it collected, evaluated on the base task
+    assert set(records["base_task"]) == {"4", "8"} and records["base_task"]["8"][0]["episodes"] == 4
+    assert api.open_version("mini-base-by-base").num_episodes == 8
+    # Fig. 5.8: each shift's 8-episode fine-tune against the base, layer by layer, over the base-task fine-tune's
+    from nsl.learners import layer_distances
+
+    with Catalog() as cat:
+        base_dir, bt = (cat.resolve_checkpoint(r).path for r in ("ckpt:base", "ckpt:mini-ft-base-n8-k10-s0@latest"))
+    norm = layer_distances(base_dir, bt)
+    wc = records["weight_change"]
+    assert set(wc) == {"harsh_lighting", "offset_gripper"} and list(wc["harsh_lighting"]) == list(norm)
+    assert all(v > 0 for v in norm.values())  # ten steps changed every layer
+    raw = layer_distances(base_dir, ft.path)
+    assert wc["harsh_lighting"] == pytest.approx({k: raw[k] / norm[k] for k in norm})
+    assert "## Where the weights change (Fig. 5.8)" in text
     # Table 5.3: one row per stage plus the base task; the matrix has base policy + 2 stages
     assert [r[0] for r in _table(text, "## The continual sequence")] == [
         "harsh lighting",
