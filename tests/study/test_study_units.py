@@ -39,9 +39,11 @@ def test_names_are_derived_from_the_plan_and_experiments_share_units():
     # the first continual stage is the single-step fine-tune of its shift at the same size: one unit
     stage1 = units["train:ft-harsh-lighting-n8-k10-s0"]
     assert stage1.params["init"] == "base" and stage1.params["target"]["tier"] == 8
-    # one base-policy collection per shift; tiers, curves and early stopping are views of it
+    # one base-policy collection per shift (and of the base task: finetune.base_task); tiers, curves and early
+    # stopping are views of it
     collects = sorted(n for n in units if n.startswith("collect:"))
     assert collects == [
+        "collect:base:base",
         "collect:harsh_lighting:base",
         "collect:offset_gripper:base",
         "collect:offset_gripper:ft-harsh-lighting-n8-k10-s0",
@@ -52,6 +54,7 @@ def test_names_are_derived_from_the_plan_and_experiments_share_units():
         if u.kind == "train" and (u.params["target"] or {}).get("collect") == "collect:harsh_lighting:base"
     }
     assert tiers == {4, 8}
+    assert {u.params["target"]["tier"] for n, u in units.items() if n.startswith("train:ft-base-")} == {4, 8}
     # stage 2 fine-tunes stage 1 on data stage 1 collected
     s2 = units["train:c2-offset-gripper-n8-k10-s0"]
     assert s2.params["init"] == "ft-harsh-lighting-n8-k10-s0"
