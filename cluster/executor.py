@@ -272,7 +272,8 @@ class RayExecutor(Executor):
 def open_executor(value: str | None = None, store: str | None = None, **init_kwargs) -> Executor:
     """The executor for ``--cluster VALUE`` (else ``$NSL_CLUSTER``, else local); use it as a context manager.
 
-    ``store`` (a URL, :mod:`.store`): the nodes share no ``NSL_HOME``; each unit runs in its node's own.
+    ``store`` (a URL, :mod:`nsl.share.store`): the nodes share no ``NSL_HOME``; each unit runs in its node's own
+    (:func:`node_home`).
     """
     spec = parse_cluster(value)
     if spec == "local":
