@@ -1,4 +1,5 @@
-"""Offline QT-Opt in PyTorch: the Q-network, CEM, fine-tuning methods, checkpoints, the CEM policy.
+"""Offline learners in PyTorch (QT-Opt, IQL, plugins): the Q-network, CEM, fine-tuning methods, checkpoints, the
+CEM policy.
 
 Public surface (other folders import these from ``nsl.learners`` only)::
 
@@ -7,6 +8,8 @@ Public surface (other folders import these from ``nsl.learners`` only)::
     QNetwork                                           # Q(image, state, action) -> logit
     cem_maximize, noise_from_generator, noise_from_rngs
     Learner, update, bellman_target                    # one QT-Opt step
+    Algorithm, register_learner, find_learner          # the learner interface (QTOpt, IQL, plugins)
+    learner_names, parse_learner
     train, TrainResult                                 # the loop: pre-training and fine-tuning
     inherited_settings                                 # what a fine-tune keeps from its parent (n-step, crop)
     Sampler, ArraySampler                              # the data contract and an in-memory sampler
@@ -25,6 +28,7 @@ from typing import TYPE_CHECKING
 from nsl.lazy import lazy_exports
 
 _EXPORTS = {
+    "algorithm": ("Algorithm", "NoOptions", "find_learner", "learner_names", "parse_learner", "register_learner"),
     "cem": ("cem_maximize", "full_actions", "noise_from_generator", "noise_from_rngs"),
     "checkpoint": (
         "CHECKPOINT_FORMAT",
@@ -42,7 +46,8 @@ _EXPORTS = {
     "config": ("FINE_TUNE_CONSERVATIVE", "FINE_TUNE_STEPS", "METHODS", "CemConfig", "NetConfig", "TrainConfig"),
     "networks": ("QNetwork",),
     "policy": ("CEMPolicy", "load_policy"),
-    "qtopt": ("Learner", "bellman_target", "update"),
+    "iql": ("IQL", "IQLOptions"),
+    "qtopt": ("Learner", "QTOpt", "bellman_target", "update"),
     "sampler": ("ArraySampler", "Sampler", "synthetic_sampler"),
     "training": ("FINAL_DIR", "TrainResult", "inherited_settings", "train"),
     "weight_change": ("layer_distances",),
@@ -51,6 +56,14 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 
 
 if TYPE_CHECKING:  # static analysers see the eager imports
+    from .algorithm import (  # noqa: F401
+        Algorithm,
+        NoOptions,
+        find_learner,
+        learner_names,
+        parse_learner,
+        register_learner,
+    )
     from .cem import cem_maximize, full_actions, noise_from_generator, noise_from_rngs  # noqa: F401
     from .checkpoint import (  # noqa: F401
         CHECKPOINT_FORMAT,
@@ -66,8 +79,9 @@ if TYPE_CHECKING:  # static analysers see the eager imports
         save_checkpoint,
     )
     from .config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_STEPS, METHODS, CemConfig, NetConfig, TrainConfig  # noqa: F401
+    from .iql import IQL, IQLOptions  # noqa: F401
     from .networks import QNetwork  # noqa: F401
     from .policy import CEMPolicy, load_policy  # noqa: F401
-    from .qtopt import Learner, bellman_target, update  # noqa: F401
+    from .qtopt import Learner, QTOpt, bellman_target, update  # noqa: F401
     from .sampler import ArraySampler, Sampler, synthetic_sampler  # noqa: F401
     from .training import FINAL_DIR, TrainResult, inherited_settings, train  # noqa: F401

@@ -70,10 +70,18 @@ class Checkpoint:
 
 
 def checkpoint_config(
-    net: QNetwork, *, training: TrainConfig, method: str, data: dict[str, Any], parent: dict[str, Any] | None, step: int
+    net: QNetwork,
+    *,
+    training: TrainConfig,
+    method: str,
+    data: dict[str, Any],
+    parent: dict[str, Any] | None,
+    step: int,
+    learner: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The ``config.json`` of a checkpoint (``training.lr`` must be the resolved learning rate)."""
-    return {
+    """The ``config.json`` of a checkpoint (``training.lr`` must be the resolved learning rate); ``learner`` is a
+    plugin learner's name and package (absent for the built-in learners)."""
+    config = {
         "format": CHECKPOINT_FORMAT,
         "version": CHECKPOINT_VERSION,
         "architecture": net.cfg.to_dict(),
@@ -84,6 +92,9 @@ def checkpoint_config(
         "code_version": code_version(),
         "step": int(step),
     }
+    if learner is not None:
+        config["learner"] = learner
+    return config
 
 
 def save_checkpoint(path: Path, net: QNetwork, config: dict[str, Any], trainer_state: dict | None = None) -> Path:
@@ -131,8 +142,11 @@ def read_config(path: Path) -> dict[str, Any]:
 
 def load_checkpoint(path: Path) -> Checkpoint:
     """Load the network of the checkpoint at ``path``, refusing weights that do not match its config."""
+    from nsl import plugins
+
     path = Path(path)
     config = read_config(path)
+    plugins.require(plugins.recorded(config), f"checkpoint {path}")  # trained by a plugin learner
     net = QNetwork(NetConfig.from_dict(config["architecture"]))
     model_file = path / MODEL_FILE
     if not model_file.is_file():

@@ -146,7 +146,7 @@ class CemConfig:
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """One offline QT-Opt run (pre-training or fine-tuning)."""
+    """One offline run (pre-training or fine-tuning) of a learner, QT-Opt by default."""
 
     steps: int = 20_000  # gradient steps (the run's total, also after a resume)
     batch_size: int = 64
@@ -175,6 +175,8 @@ class TrainConfig:
     checkpoint_every: int = 2000  # steps between checkpoints (a killed run resumes from the last one)
     eval_every: int = 0  # steps between eval_fn calls; 0 disables
     keep_trainer_state: int = 1  # how many of the newest checkpoints keep their trainer state (resume data)
+    learner: str = "qtopt"  # the offline learner (learners/algorithm.py): qtopt, iql, or a plugin's name
+    learner_options: dict[str, Any] = field(default_factory=dict)  # that learner's own settings
 
     def __post_init__(self) -> None:
         if isinstance(self.cem, dict):
@@ -218,6 +220,10 @@ class TrainConfig:
             object.__setattr__(self, "shrink_perturb", (float(sp[0]), float(sp[1])))
         if self.precision not in ("fp32", "bf16", "auto"):
             raise ConfigError(f"precision {self.precision!r} is unknown; use fp32, bf16 or auto")
+        if not isinstance(self.learner, str) or not self.learner:
+            raise ConfigError(f"learner {self.learner!r} must be a learner's name, e.g. qtopt or iql")
+        if not isinstance(self.learner_options, dict):
+            raise ConfigError(f"learner_options {self.learner_options!r} must be a table of the learner's settings")
         if self.keep_trainer_state < 1:
             raise ConfigError(f"keep_trainer_state {self.keep_trainer_state} must be at least 1 (resume needs one)")
 
@@ -235,6 +241,8 @@ class TrainConfig:
         d["cem"] = self.cem.to_dict()
         if d["precision"] == "fp32":
             del d["precision"]  # absent means fp32: configs (and checkpoint ids) made before the option hold
+        if d["learner"] == "qtopt" and not d["learner_options"]:
+            del d["learner"], d["learner_options"]  # absent means QT-Opt: the same for the learner interface
         return d
 
     @classmethod

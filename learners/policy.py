@@ -150,12 +150,16 @@ def load_policy(
     precision: str = "fp32",
     **cem_overrides: Any,
 ) -> CEMPolicy:
-    """A :class:`CEMPolicy` from a checkpoint folder; CEM settings default to the checkpoint's training ones.
+    """The policy of a checkpoint folder (its learner's; a :class:`CEMPolicy` for the built-in ones); CEM settings
+    default to the checkpoint's training ones.
 
     ``precision`` is the precision it acts in (``fp32``, ``bf16`` or ``auto``), whatever it was trained in.
     """
+    from .algorithm import find_learner
+
     ckpt = load_checkpoint(Path(checkpoint_dir))
-    cem = TrainConfig.from_dict(ckpt.config["training"]).cem
+    training = TrainConfig.from_dict(ckpt.config["training"])
+    cem = training.cem
     unknown = sorted(set(cem_overrides) - set(cem.to_dict()))
     if unknown:
         raise ConfigError(f"unknown CEM setting(s) {unknown}; known: {sorted(cem.to_dict())}")
@@ -163,7 +167,8 @@ def load_policy(
     path = Path(checkpoint_dir)
     # The content id, not the path: a dataset's metadata (and so its version hash) holds this description.
     info = {"checkpoint_id": checkpoint_id(path), "step": ckpt.step}
-    return CEMPolicy(
+    algo, _ = find_learner(training.learner)  # how its learner acts (the built-in learners: CEM over Q)
+    return algo.policy(
         ckpt.net,
         cem,
         epsilon=epsilon,

@@ -41,6 +41,7 @@ import torch.nn.functional as F
 
 from nsl import keys
 
+from .algorithm import Algorithm, NoOptions
 from .augment import prepare_images
 from .cem import active_actions, cem_maximize, noise_from_generator
 from .config import CemConfig, TrainConfig
@@ -71,6 +72,10 @@ class Learner:
         gen = torch.Generator().manual_seed(cfg.seed)
         return cls(net, clone_frozen(net), clone_frozen(net), opt, gen)
 
+    def set_lr(self, lr: float) -> None:
+        for group in self.optimizer.param_groups:
+            group["lr"] = lr
+
     def state_dict(self) -> dict:
         return {
             "online": self.online.state_dict(),
@@ -86,6 +91,19 @@ class Learner:
         self.lagged.load_state_dict(state["lagged"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.generator.set_state(state["generator"])
+
+
+class QTOpt(Algorithm):
+    """The learner ``qtopt``: :class:`Learner` and :func:`update` behind the learner interface."""
+
+    name = "qtopt"
+    conservative = True
+
+    def create(self, net: QNetwork, lr: float, cfg: TrainConfig, options: NoOptions) -> Learner:
+        return Learner.create(net, lr, cfg)
+
+    def update(self, state: Learner, batch: dict, cfg: TrainConfig, step: int, options: NoOptions) -> dict:
+        return update(state, batch, cfg, step)
 
 
 def bellman_target(

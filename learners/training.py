@@ -47,6 +47,7 @@ from nsl.errors import ConfigError
 from nsl.progress import progress_bar
 from nsl.workspace import atomic_write_bytes
 
+from .algorithm import Algorithm, find_learner
 from .checkpoint import (
     TRAINER_FILE,
     Checkpoint,
@@ -62,7 +63,7 @@ from .config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_LR_FACTOR, METHODS, NetCon
 from .networks import QNetwork, grow_column, reinit_head, shrink_perturb
 from .policy import CEMPolicy
 from .precision import resolve_precision
-from .qtopt import Learner, batch_to_torch, update
+from .qtopt import batch_to_torch
 from .sampler import Sampler
 
 DEFAULT_LR = 3e-4
@@ -109,8 +110,15 @@ def resolve_lr(config: TrainConfig, method: str, parent: Checkpoint | None) -> f
     return parent.lr if method == "scratch" else parent.lr * FINE_TUNE_LR_FACTOR
 
 
-def resolve_conservative(config: TrainConfig, parent: Checkpoint | None) -> float:
-    """The explicit ``config.conservative``, else 0 from scratch and FINE_TUNE_CONSERVATIVE with a parent."""
+def resolve_conservative(config: TrainConfig, parent: Checkpoint | None, algo: Algorithm | None = None) -> float:
+    """The explicit ``config.conservative``, else 0 from scratch and FINE_TUNE_CONSERVATIVE with a parent; always 0
+    for a learner without the term."""
+    if algo is not None and not algo.conservative:
+        if config.conservative:
+            raise ConfigError(
+                f"learner {algo.name!r} has no conservative term; drop --conservative (or use learner qtopt)"
+            )
+        return 0.0
     if config.conservative is not None:
         return config.conservative
     return 0.0 if parent is None else FINE_TUNE_CONSERVATIVE
@@ -149,6 +157,9 @@ def train(
 ) -> TrainResult:
     """Train (or resume training) a Q-function from ``sampler``'s transitions into ``out_dir``.
 
+    ``config.learner`` names the learner that takes the gradient steps (``qtopt``, ``iql`` or a plugin's;
+    learners/algorithm.py); everything else here is the same for every learner.
+
     ``net`` is the architecture for a run from scratch without a parent; with
     ``init_checkpoint`` the architecture comes from the parent.  ``eval_fn(step,
     policy)`` is called every ``config.eval_every`` steps with a CEM policy
@@ -159,6 +170,14 @@ def train(
     method = method or ("ft" if init_checkpoint is not None else "scratch")
     if method not in METHODS:
         raise ConfigError(f"method {method!r} is unknown; use one of {', '.join(METHODS)}")
+    algo, plugin = find_learner(config.learner)
+    if method not in algo.methods:
+        raise ConfigError(
+            f"learner {algo.name!r} does not support method {method!r}; use one of {', '.join(algo.methods)}"
+        )
+    if eval_fn is not None and config.eval_every and not algo.early_stopping:
+        raise ConfigError(f"learner {algo.name!r} does not support early stopping; drop --eval-every")
+    options = algo.options(config.learner_options)
     if init_checkpoint is None and method != "scratch":
         raise ConfigError(f"method {method!r} fine-tunes a parent; pass init_checkpoint (or use method 'scratch')")
     if init_checkpoint is not None and net is not None:
@@ -173,7 +192,10 @@ def train(
     parent = load_checkpoint(Path(init_checkpoint)) if init_checkpoint is not None else None
     lr = resolve_lr(config, method, parent)
     resolved = config.replace(
-        lr=lr, conservative=resolve_conservative(config, parent), precision=resolve_precision(config.precision)
+        lr=lr,
+        conservative=resolve_conservative(config, parent, algo),
+        precision=resolve_precision(config.precision),
+        learner_options=algo.option_dict(options),
     )
     model = initial_network(method, parent, net or (None if parent else NetConfig()), config.seed)
     if config.shrink_perturb is not None:
@@ -198,9 +220,12 @@ def train(
         "architecture": model.cfg.to_dict(),
         "data": data,
     }
+    learner_record = None if plugin is None else {"name": algo.name, "plugin": dict(plugin)}
+    if learner_record is not None:
+        run["learner"] = learner_record  # a plugin learner: its package and version (nsl.plugins)
     _check_same_run(out, run)
 
-    learner = Learner.create(model, lr, resolved)
+    learner = algo.create(model, lr, resolved, options)
     rng = np.random.default_rng(config.seed)
     step = 0
     resume = _latest_trainer_state(out)
@@ -218,7 +243,13 @@ def train(
 
     def ckpt_config(at: int) -> dict:
         return checkpoint_config(
-            learner.online, training=resolved, method=method, data=run["data"], parent=parent_info, step=at
+            learner.online,
+            training=resolved,
+            method=method,
+            data=run["data"],
+            parent=parent_info,
+            step=at,
+            learner=learner_record,
         )
 
     log = _Logger(out, step)
@@ -232,13 +263,12 @@ def train(
     )
     try:
         if eval_fn is not None and config.eval_every and step == 0:
-            stop = _evaluate(eval_fn, learner, resolved, 0, out, log, evals)
+            stop = _evaluate(eval_fn, algo, learner.online, resolved, 0, out, log, evals)
         while step < config.steps and not stop:
             batch = batch_to_torch(sampler.sample(config.batch_size, rng))
             step_lr = resolved.lr_at(step)
-            for group in learner.optimizer.param_groups:
-                group["lr"] = step_lr
-            metrics = update(learner, batch, resolved, step)
+            learner.set_lr(step_lr)
+            metrics = algo.update(learner, batch, resolved, step, options)
             step += 1
             n0 += 1
             for k, v in metrics.items():
@@ -260,7 +290,7 @@ def train(
                 window, t0, n0 = {}, time.perf_counter(), 0
             evaluated = eval_fn is not None and config.eval_every and step % config.eval_every == 0
             if evaluated and eval_fn is not None:
-                stop = _evaluate(eval_fn, learner, resolved, step, out, log, evals)
+                stop = _evaluate(eval_fn, algo, learner.online, resolved, step, out, log, evals)
             if step % config.checkpoint_every == 0 or step == config.steps or stop or evaluated:
                 _save_periodic(out, learner, rng, step, ckpt_config(step), config.keep_trainer_state)
     finally:
@@ -271,10 +301,17 @@ def train(
 
 
 def _evaluate(
-    eval_fn: EvalFn, learner: Learner, cfg: TrainConfig, step: int, out: Path, log: _Logger, evals: list
+    eval_fn: EvalFn,
+    algo: Algorithm,
+    online: QNetwork,
+    cfg: TrainConfig,
+    step: int,
+    out: Path,
+    log: _Logger,
+    evals: list,
 ) -> bool:
-    snapshot = copy.deepcopy(learner.online).eval()
-    policy = CEMPolicy(
+    snapshot = copy.deepcopy(online).eval()
+    policy = algo.policy(
         snapshot, cfg.cem, name=f"{out.name}@{step}", info={"run": str(out), "step": step}, precision=cfg.precision
     )
     result = dict(eval_fn(step, policy) or {})
@@ -300,7 +337,7 @@ def _latest_trainer_state(out: Path) -> Path | None:
     return with_state[-1] if with_state else None
 
 
-def _save_periodic(out: Path, learner: Learner, rng: np.random.Generator, step: int, config: dict, keep: int) -> None:
+def _save_periodic(out: Path, learner: Any, rng: np.random.Generator, step: int, config: dict, keep: int) -> None:
     state = {
         "learner": learner.state_dict(),
         "numpy_rng": rng.bit_generator.state,

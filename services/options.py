@@ -136,6 +136,13 @@ class TrainOptions:
     name: str = option(None, "checkpoint name in the catalog (also the run folder)")
     init: str | None = option(None, "parent checkpoint, e.g. ckpt:base or ckpt:run@best")
     method: str | None = option(None, METHOD_HELP + " (default: ft with --init, else scratch)")
+    learner: str = option(
+        TrainConfig.learner,
+        "the offline learner: qtopt (QT-Opt, CEM maximum in the target), iql (implicit Q-learning: targets through "
+        "an expectile of Q over the data's actions, acting by CEM), or a plugin's PACKAGE.NAME; NAME:KEY=VALUE,... "
+        "sets its options, e.g. iql:expectile=0.9 (docs/learners.md)",
+        metavar="NAME[:OPTS]",
+    )
     lr: float | None = option(
         TrainConfig.lr, f"learning rate (default: 3e-4; fine-tuning: {FINE_TUNE_LR_FACTOR:.0%} of the parent's)"
     )

@@ -180,7 +180,7 @@ def train(
     from nsl import code_version, workspace
     from nsl.catalog import Catalog
     from nsl.datasets import api
-    from nsl.learners import TrainConfig, inherited_settings
+    from nsl.learners import TrainConfig, inherited_settings, parse_learner
     from nsl.learners import config as learner_config
     from nsl.learners import train as train_learner
 
@@ -239,7 +239,10 @@ def train(
         if o.no_augment
         else ({"augment_crop": crop} if crop is not None else {})
     )
+    learner, learner_options = parse_learner(o.learner)
     config = TrainConfig(
+        learner=learner,
+        learner_options=learner_options,
         steps=steps,
         batch_size=o.batch_size,
         lr=o.lr,

@@ -11,6 +11,7 @@ one ``nsl.errors`` exception, raised before any work starts.
 Sections (see ``study/plans/small.toml`` for a commented example)::
 
     name, base, shifts                 the study's name, base checkpoint, challenge shifts
+    learner, precision                 how every training unit learns (default qtopt, fp32)
     [base_data]                        base-task data: the checkpoint's own (hash-checked) or listed here
     [collect]                          target data: episodes per shift, exploration epsilon, seed
     [eval]                             evaluation episodes and scene seed (every table)
@@ -28,7 +29,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from nsl.errors import ConfigError, UnknownReferenceError
+from nsl.errors import ConfigError, UnknownReferenceError, unknown
 from nsl.scenes import REPORTING_SCENES, SELECTION_SCENES
 
 SHIPPED = ("tiny", "small", "full", "full-seeds", "full-sequence", "paper")
@@ -146,6 +147,7 @@ class Plan:
     checkpoint_every: int = 500  # a killed training resumes from its last checkpoint
     precision: str = "fp32"  # training units' arithmetic: fp32, bf16 (CPU bfloat16 autocast) or auto (bf16 if the CPU
     # has it); evaluations and collections act in fp32, which is faster for CEM's one-state searches on the CPU
+    learner: str = "qtopt"  # every training unit's learner (nsl train --learner): qtopt, iql[:OPTS] or a plugin's
     base_data: BaseData = field(default_factory=BaseData)
     collect: Collect = field(default_factory=Collect)
     eval: Eval = field(default_factory=Eval)
@@ -283,7 +285,6 @@ def _shift(name: str, what: str) -> str:
 
 
 def _method(name: str, what: str, also: tuple[str, ...] = ()) -> None:
-    from nsl.errors import unknown
     from nsl.learners import METHODS
 
     if name not in METHODS:
@@ -309,6 +310,11 @@ def validate(plan: Plan) -> None:
 
     if plan.precision not in PRECISIONS:
         raise ConfigError(f"plan precision = {plan.precision!r} is unknown; use one of {', '.join(PRECISIONS)}")
+    from nsl.learners.algorithm import learner_names, parse_learner
+
+    learner, _ = parse_learner(str(plan.learner))
+    if learner not in learner_names():
+        raise unknown("learner", learner, learner_names(), "(plan learner; a plugin's comes from nsl.learners)")
     bd = plan.base_data
     if bd.source not in BASE_DATA_SOURCES:
         raise ConfigError(f"plan base_data.source = {bd.source!r}; use 'checkpoint' (the base's own data) or 'plan'")

@@ -185,6 +185,7 @@ class _Builder:
                     "monitor": None if monitor is None else dict(monitor),
                     # fp32 is left out, so the units of plans made before the setting keep their parameters
                     **({} if self.plan.precision == "fp32" else {"precision": self.plan.precision}),
+                    **({} if self.plan.learner == "qtopt" else {"learner": self.plan.learner}),
                 },
                 tuple(deps),
             )

@@ -1,4 +1,4 @@
-"""``nsl train``: pre-train or fine-tune a QT-Opt Q-function offline, and catalogue the result."""
+"""``nsl train``: pre-train or fine-tune a Q-function offline (QT-Opt, IQL or a plugin learner), and catalogue it."""
 
 from __future__ import annotations
 
@@ -18,7 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         sub,
         "train",
         help="pre-train (no --init) or fine-tune (--init CKPT) a Q-function offline",
-        description="Offline QT-Opt on one or more dataset versions mixed by weight. Without --init this is "
+        description="Offline QT-Opt (or --learner iql, or a plugin's learner) on one or more dataset versions "
+        "mixed by weight. Without --init this is "
         "pre-training; with --init it fine-tunes from a catalogued checkpoint with the fine-tuning "
         f"recipe: {FINE_TUNE_STEPS:,} steps at {FINE_TUNE_LR_FACTOR:.0%} of its learning rate, keeping "
         "its n-step returns and crop, with the conservative term at "
@@ -31,6 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_field(p, c, "data", action="append", required=True, metavar="REF[=WEIGHT]")
     add_field(p, c, "init", metavar="CKPT")
     add_field(p, c, "method", choices=METHODS)
+    add_field(p, c, "learner")
     add_field(p, c, "lr", type=float)
     add_field(p, c, "steps", type=int)
     add_field(p, c, "lr_decay")

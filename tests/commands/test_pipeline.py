@@ -10,6 +10,7 @@ import pytest
 from nsl import workspace
 from nsl.catalog import Catalog
 from nsl.errors import ConfigError, UnknownReferenceError
+from nsl.learners import read_config
 from tests.conftest import run_cli
 
 
@@ -626,3 +627,24 @@ def test_simulator_early_stopping_evaluates_on_its_own_scenes_and_catalogues_the
             evals = {(e.shift, e.seed, e.episodes) for e in cat.evaluations(entry.id)}
             assert evals == {("harsh_lighting", 3000, 3), ("base", 3000, 2)}
     assert "best by eval:" in capsys.readouterr().out
+
+
+def test_iql_pre_trains_and_fine_tunes_from_the_command_line_and_its_checkpoint_collects(pipeline, capsys):
+    """`nsl train --learner iql` from scratch and from a QT-Opt parent (new head); the checkpoints record the learner,
+    are catalogued with their lineage, and act through CEM like any other."""
+    base = ["--data", "grasp-base", "--steps", "4", "--checkpoint-every", "2"]
+    assert run_cli("train", "--learner", "iql:v_warmup=1", *base, "--name", "iql-tiny") == 0
+    ft = ["--data", "grasp-base=0.5", "--data", "grasp-harsh=0.5", "--steps", "3", "--learner", "iql:expectile=0.9"]
+    assert run_cli("train", *ft, "--init", "ckpt:base-tiny", "--method", "new_head", "--name", "iql-harsh") == 0
+    with Catalog() as cat:
+        child = cat.resolve_checkpoint("ckpt:iql-harsh@latest")
+        assert child.parent == cat.resolve_checkpoint("ckpt:base-tiny@latest").id
+        training = read_config(Path(child.path))["training"]
+    assert training["learner"] == "iql" and training["learner_options"] == {"expectile": 0.9, "v_warmup": 200}
+    assert training["conservative"] == 0.0  # IQL has no conservative term, also when fine-tuning
+    assert run_cli("eval", "--checkpoint", "ckpt:iql-tiny", "--episodes", "2", "--batch-size", "2") == 0
+    capsys.readouterr()
+    assert run_cli("train", *base, "--learner", "iql:tau=0.9", "--name", "iql-bad") == 2
+    assert "learner 'iql' has no option(s) ['tau']" in capsys.readouterr().err
+    assert run_cli("train", *base, "--learner", "sac", "--name", "sac") == 2
+    assert "unknown learner 'sac'" in capsys.readouterr().err

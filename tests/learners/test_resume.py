@@ -32,8 +32,13 @@ class _CrashingSampler:
         return self.inner.describe()
 
 
-def test_resumed_run_equals_an_uninterrupted_one(random_sampler, tmp_path):
-    cfg = tiny_train(steps=24, checkpoint_every=8, log_every=4, lag_period=5, augment_crop=2, augment_colour=0.2)
+@pytest.mark.parametrize("learner", ["qtopt", "iql"])
+def test_resumed_run_equals_an_uninterrupted_one(random_sampler, tmp_path, learner):
+    cfg = tiny_train(
+        steps=24, checkpoint_every=8, log_every=4, lag_period=5, augment_crop=2, augment_colour=0.2, learner=learner
+    )
+    if learner == "iql":
+        cfg = cfg.replace(learner_options={"v_warmup": 3})
     whole = train(cfg, random_sampler, tmp_path / "whole", net=TINY_NET, progress=False)
     with pytest.raises(_Crash):
         train(cfg, _CrashingSampler(random_sampler, crash_at=13), tmp_path / "killed", net=TINY_NET, progress=False)

@@ -153,6 +153,20 @@ def test_the_plans_precision_reaches_every_training_unit_and_fp32_leaves_the_uni
         _units('precision = "fp16"\n' + MINI_PLAN)
 
 
+def test_the_plans_learner_reaches_every_training_unit_and_qtopt_leaves_the_units_as_they_were():
+    import pytest
+
+    from nsl.errors import UnknownReferenceError
+
+    _, qtopt = _units()
+    assert all("learner" not in u.params for u in qtopt.values())
+    _, iql = _units('learner = "iql:expectile=0.9"\n' + MINI_PLAN)
+    assert {u.params["learner"] for u in iql.values() if u.kind == "train"} == {"iql:expectile=0.9"}
+    assert all("learner" not in u.params for u in iql.values() if u.kind != "train")
+    with pytest.raises(UnknownReferenceError, match="unknown learner 'sac'"):
+        _units('learner = "sac"\n' + MINI_PLAN)
+
+
 def test_the_estimate_counts_a_bf16_training_unit_at_the_measured_speed_up(monkeypatch):
     import pytest
 
