@@ -2,7 +2,7 @@
 
 The Python API is this package's functions (``nsl.api``, loaded on first use)::
 
-    nsl.collect  nsl.train  nsl.evaluate  nsl.report  nsl.continual  nsl.efficiency  nsl.push  nsl.pull
+    nsl.collect  nsl.train  nsl.evaluate  nsl.report  nsl.continual  nsl.online  nsl.efficiency  nsl.push  nsl.pull
     nsl.study_run  nsl.study_status  nsl.study_report  nsl.transfer_run  nsl.build_curriculum
 
 with their configs (``nsl.CollectConfig``, ``nsl.TrainOptions``, ...) and the
@@ -49,6 +49,7 @@ _API = (
     "Curriculum",
     "EfficiencyConfig",
     "EvaluateOptions",
+    "OnlineConfig",
     "StudyRun",
     "TrainOptions",
     "EVAL_SCENES",
@@ -60,6 +61,7 @@ _API = (
     "continual",
     "efficiency",
     "evaluate",
+    "online",
     "pull",
     "push",
     "report",

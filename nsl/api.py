@@ -31,11 +31,19 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from nsl import _API
 from nsl.errors import ConfigError
 from nsl.scenes import EVAL_SCENES, FINAL_REPORTING_SCENES, REPORTING_SCENES, SELECTION_SCENES  # noqa: F401  (re-exported)
-from nsl.services.options import CollectConfig, ContinualConfig, EfficiencyConfig, EvaluateOptions, TrainOptions
+from nsl.services.options import (
+    CollectConfig,
+    ContinualConfig,
+    EfficiencyConfig,
+    EvaluateOptions,
+    OnlineConfig,
+    TrainOptions,
+)
 
 if TYPE_CHECKING:
     from nsl.services.continual import ContinualResult
     from nsl.services.evaluate import EvaluationResult
+    from nsl.services.online import OnlineResult
     from nsl.services.share import Pulled, Pushed
     from nsl.services.train import TrainResult
 
@@ -145,6 +153,21 @@ def continual(
     elif "sequence" in fields:
         fields["sequence"] = tuple(fields["sequence"])
     return run(_settle(ContinualConfig, config, fields, "continual"), name, progress=progress)
+
+
+def online(
+    config: OnlineConfig | None = None, /, *, name: str = "online", progress: bool = True, **fields: Any
+) -> OnlineResult:
+    """Online fine-tuning in rounds: the policy collects in the target shift and is fine-tuned on everything
+    collected so far, mixed with base data (``nsl online``).  Resumes a run of the same ``name``."""
+    from nsl.services.online import online as run
+
+    for key in ("base_data",):
+        if isinstance(fields.get(key), str):
+            fields[key] = (fields[key],)
+        elif key in fields:
+            fields[key] = tuple(fields[key])
+    return run(_settle(OnlineConfig, config, fields, "online"), name, progress=progress)
 
 
 def efficiency(

@@ -258,6 +258,30 @@ class ContinualConfig:
 
 
 @dataclass(frozen=True)
+class OnlineConfig:
+    """One online fine-tuning run in rounds (``nsl online``); saved as RUN/config.json."""
+
+    shift: str = option("", "the target shift the policy keeps collecting in, e.g. harsh_lighting@2")
+    init: str = option("ckpt:base", "the starting checkpoint (round 0)")
+    base_data: tuple[str, ...] = option(
+        ("grasp-base",),
+        "base dataset(s) REF[=WEIGHT] mixed into every round at 1 - --ratio; repeat for a mix (default: grasp-base)",
+        metavar="REF[=WEIGHT]",
+    )
+    rounds: int = option(5, "rounds of collection and fine-tuning")
+    episodes: int = option(800, "grasps the current policy collects per round")
+    steps: int = option(FINE_TUNE_STEPS, "gradient steps per round (the fine-tuning recipe's)")
+    ratio: float = option(0.5, "the target data's share of each batch (Fig. 5.11 sweeps 0.01-0.99)")
+    method: str = option("ft", "round 1's method: ft (all parameters) or new_head (a fresh head); later rounds ft")
+    learner: str = option(TrainConfig.learner, "the offline learner of every round (nsl train --learner)")
+    epsilon: float = option(0.1, "exploration while collecting: chance of a random action per step")
+    eval_episodes: int = option(EvalConfig.episodes, "evaluation episodes after each round")
+    eval_seed: int = option(EvalConfig.seed, "scene seed of the evaluations (nsl eval --seed)")
+    workers: int = option(1, "simulator processes for collection and evaluation")
+    seed: int = option(0, "round i collects with scene seed SEED + i; every round trains with SEED")
+
+
+@dataclass(frozen=True)
 class EfficiencyConfig:
     """One sample-efficiency run; saved as RUN/config.json."""
 
@@ -282,6 +306,7 @@ __all__ = [
     "ContinualConfig",
     "EfficiencyConfig",
     "EvaluateOptions",
+    "OnlineConfig",
     "TrainOptions",
     "option",
 ]

@@ -1,5 +1,5 @@
-"""Extending nsl without touching its source: the example package ``examples/nsl-occluder`` adds a shift and a
-policy through entry points only, and nsl renders, collects, trains and runs a study with them; what it made
+"""Extending nsl without touching its source: the example package ``examples/nsl-occluder`` adds a shift, a
+policy and a learner through entry points only, and nsl renders, collects, trains and runs a study with them; what it made
 records the package, and reading it where the package is missing fails in one line that names it."""
 
 from __future__ import annotations
@@ -93,6 +93,15 @@ def test_the_example_plugin_renders_collects_trains_and_runs_a_study(plugin_path
     out = _nsl(home, "train", "--data", "occluded", "--init", "ckpt:base", "--steps", "3", "--batch-size", "8",
                "--name", "occ", plugin=plugin_path)  # fmt: skip
     assert out.returncode == 0, out.stderr[-2000:]
+    out = _nsl(home, "train", "--data", "occluded", "--init", "ckpt:base", "--steps", "2", "--batch-size", "8",
+               "--learner", "nsl_occluder.bandit:reward_scale=0.9", "--name", "occ-bandit", plugin=plugin_path)  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    config = json.loads((home / "runs" / "occ-bandit" / "final" / "config.json").read_text())
+    assert config["learner"] == {"name": "nsl_occluder.bandit", "plugin": PACKAGE}
+    assert config["training"]["learner_options"] == {"reward_scale": 0.9}
+    out = _nsl(home, "train", "--data", "occluded", "--init", "ckpt:base", "--steps", "2", "--method", "pnn",
+               "--learner", "nsl_occluder.bandit", "--name", "occ-pnn", plugin=plugin_path)  # fmt: skip
+    assert "learner 'nsl_occluder.bandit' does not support method 'pnn'" in out.stderr
 
     plan = tmp_path / "plugin.toml"
     plan.write_text(PLAN)
@@ -106,6 +115,10 @@ def test_the_example_plugin_renders_collects_trains_and_runs_a_study(plugin_path
     assert out.returncode != 0
     assert "made with the plugin package nsl-occluder 0.1.0, which is not installed here" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1, out.stderr
+    # and so is the checkpoint its learner trained
+    out = _nsl(home, "eval", "--checkpoint", "ckpt:occ-bandit", "--episodes", "1")
+    assert out.returncode != 0 and len(out.stderr.strip().splitlines()) == 1, out.stderr
+    assert "made with the plugin package nsl-occluder 0.1.0, which is not installed here" in out.stderr
 
 
 def test_plugin_records_are_checked_by_package_and_major_version(plugin_path, monkeypatch):
@@ -120,6 +133,7 @@ def test_plugin_records_are_checked_by_package_and_major_version(plugin_path, mo
     with pytest.raises(IncompatibleVersionError, match=r"nsl-occluder 1.0, but 0.1.0 is installed"):
         plugins.require([{**PACKAGE, "version": "1.0"}], "dataset d")
     assert "lens_occluder" in plugins.names("nsl.shifts") and "nsl_occluder.centre" in plugins.names("nsl.policies")
+    assert plugins.names("nsl.learners") == ["nsl_occluder.bandit"]
     plugins._entry_points.cache_clear()
 
 

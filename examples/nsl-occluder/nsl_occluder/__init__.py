@@ -5,15 +5,20 @@
 * ``nsl_occluder.centre[:NOISE]``: a scripted collection policy.  It descends at the bin's centre region with a
   random wrist position and yaw (Gaussian ``NOISE`` on each action, default 0.3), a weak but non-trivial
   baseline between ``random`` and ``oracle``.
+* ``nsl_occluder.bandit``: an offline learner.  It fits Q to each transition's own reward, with no bootstrapping
+  (a contextual bandit: the grasp's last step is all it learns), and acts through nsl's CEM like QT-Opt.
 
-nsl finds both through the entry points in ``pyproject.toml``; nothing in nsl's source names them.
+nsl finds all three through the entry points in ``pyproject.toml``; nothing in nsl's source names them.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from nsl.collectors import ShiftDef
+from nsl.learners import Algorithm
 
 __version__ = "0.1.0"
 
@@ -82,3 +87,45 @@ class CentrePolicy:
 def centre_policy(args: str, *, control: str, move_step: float, yaw_step: float) -> CentrePolicy:
     """nsl's policy-plugin contract: ``factory(ARGS, *, control, move_step, yaw_step)`` -> a policy."""
     return CentrePolicy(float(args) if args else 0.3)
+
+
+@dataclass(frozen=True)
+class BanditOptions:
+    """``--learner nsl_occluder.bandit:reward_scale=0.9``."""
+
+    reward_scale: float = 1.0  # the target is reward_scale * r
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.reward_scale <= 1.0:
+            raise ValueError(f"reward_scale {self.reward_scale} must be in (0, 1]")
+
+
+class BanditLearner(Algorithm):
+    """Q(s, a) fitted to the transition's reward by log loss; QT-Opt's optimiser, no target networks."""
+
+    name = "nsl_occluder.bandit"
+    methods = ("scratch", "ft", "new_head")  # nsl refuses pnn and ft_pnn for this learner
+    Options = BanditOptions
+
+    def create(self, net, lr, cfg, options):
+        from nsl.learners import Learner
+
+        return Learner.create(net, lr, cfg)  # its online network, Adam and generator will do
+
+    def update(self, state, batch, cfg, step, options):
+        import torch.nn.functional as F
+
+        from nsl import keys
+        from nsl.learners.augment import prepare_images
+        from nsl.learners.cem import active_actions
+
+        net = state.online
+        image = prepare_images(batch[keys.OBS_IMAGE], cfg.augment_crop, cfg.augment_colour, state.generator)
+        logits = net(image, batch[keys.OBS_STATE], active_actions(batch[keys.ACTION], net.cfg)).float()
+        target = options.reward_scale * batch[keys.REWARD]
+        loss = F.binary_cross_entropy_with_logits(logits, target)
+        state.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        state.optimizer.step()
+        q = logits.detach().sigmoid()
+        return {"losses/q_loss": loss.item(), "q/mean": q.mean().item(), "q/target_mean": target.mean().item()}
