@@ -63,12 +63,8 @@ def main() -> None:
             tag = s.split("@")[0]
             per = rates(args.folder / f"{lrn}-{tag}.json")
             tuned[lrn][s] = [r[s] for _, r in sorted(per.items())]
-        base_cells = [
-            " / ".join(pct(r[s]) for _, r in sorted(bases[lrn].items())) for s in ["base", *shifts]
-        ]
-        ft_cells = [
-            f"{pct(*mean_t(tuned[lrn][s]))} ({', '.join(pct(v) for v in tuned[lrn][s])})" for s in shifts
-        ]
+        base_cells = [" / ".join(pct(r[s]) for _, r in sorted(bases[lrn].items())) for s in ["base", *shifts]]
+        ft_cells = [f"{pct(*mean_t(tuned[lrn][s]))} ({', '.join(pct(v) for v in tuned[lrn][s])})" for s in shifts]
         print(f"| {lrn} | {' | '.join(base_cells)} | {' | '.join(ft_cells)} |")
     if len(args.learners) == 2:
         a, b = args.learners

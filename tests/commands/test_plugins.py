@@ -1,6 +1,6 @@
 """Extending nsl without touching its source: the example package ``examples/nsl-occluder`` adds a shift, a
-policy and a learner through entry points only, and nsl renders, collects, trains and runs a study with them; what it made
-records the package, and reading it where the package is missing fails in one line that names it."""
+policy and a learner through entry points only, and nsl renders, collects, trains and runs a study with them;
+what it made records the package, and reading it where the package is missing fails in one line that names it."""
 
 from __future__ import annotations
 
@@ -93,8 +93,9 @@ def test_the_example_plugin_renders_collects_trains_and_runs_a_study(plugin_path
     out = _nsl(home, "train", "--data", "occluded", "--init", "ckpt:base", "--steps", "3", "--batch-size", "8",
                "--name", "occ", plugin=plugin_path)  # fmt: skip
     assert out.returncode == 0, out.stderr[-2000:]
+    bandit = ["--learner", "nsl_occluder.bandit:reward_scale=0.9", "--name", "occ-bandit"]
     out = _nsl(home, "train", "--data", "occluded", "--init", "ckpt:base", "--steps", "2", "--batch-size", "8",
-               "--learner", "nsl_occluder.bandit:reward_scale=0.9", "--name", "occ-bandit", plugin=plugin_path)  # fmt: skip
+               *bandit, plugin=plugin_path)  # fmt: skip
     assert out.returncode == 0, out.stderr[-2000:]
     config = json.loads((home / "runs" / "occ-bandit" / "final" / "config.json").read_text())
     assert config["learner"] == {"name": "nsl_occluder.bandit", "plugin": PACKAGE}
