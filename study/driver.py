@@ -21,7 +21,16 @@ from nsl.errors import ConfigError, UnknownReferenceError
 
 from . import actions
 from .plan import Plan, load_plan, parse_plan
-from .report import RECORDS_FILE, REPORT_FILE, gather, plot_curves, plot_early_stop, plot_tiers, render
+from .report import (
+    RECORDS_FILE,
+    REPORT_FILE,
+    gather,
+    plot_curves,
+    plot_early_stop,
+    plot_tiers,
+    plot_weight_change,
+    render,
+)
 from .scheduler import STATUS_FILE, live_status, pid_alive, read_status, run_graph
 from .units import build_units, order, unit_graph
 
@@ -288,6 +297,8 @@ def write_study_report(name: str) -> Path:
         figures["curves"] = plot_curves(records, folder / "curves.png").name
     if records.get("early_stop"):
         figures["early_stop"] = plot_early_stop(records, folder / "early_stop.png").name
+    if records.get("weight_change"):
+        figures["weight_change"] = plot_weight_change(records, folder / "weight_change.png").name
     text = render(records, read_status(folder / STATUS_FILE), figures)
     workspace.atomic_write_bytes(folder / REPORT_FILE, (text + "\n").encode())
     return folder / REPORT_FILE

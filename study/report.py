@@ -945,6 +945,29 @@ def plot_curves(records: Mapping[str, Any], path: Path) -> Path:
     return _save(fig, path)
 
 
+def plot_weight_change(records: Mapping[str, Any], path: Path) -> Path:
+    """Fig. 5.8: per layer (trunk to head), each shift's normalised cosine distance as a bar; 1 is the base task."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    wc = records["weight_change"]
+    shifts, layers = list(wc), list(next(iter(wc.values())))
+    width = 0.8 / len(shifts)
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.6 * len(layers) + 2), 4.0))
+    for i, shift in enumerate(shifts):
+        xs = [j + (i - (len(shifts) - 1) / 2) * width for j in range(len(layers))]
+        ax.bar(xs, [wc[shift][layer] for layer in layers], width, color=f"C{i % 10}", label=_pretty(shift))
+    ax.axhline(1.0, color="k", lw=0.8, ls="--", label="fine-tune on the base task")
+    ax.set_xticks(range(len(layers)), layers, rotation=40, ha="right", fontsize=8)
+    ax.set_ylabel("cosine distance to the base / base task's")
+    ax.set_title("Where the weights change (Fig. 5.8)")
+    ax.legend(fontsize=7)
+    ax.grid(axis="y", alpha=0.3)
+    return _save(fig, path)
+
+
 def plot_early_stop(records: Mapping[str, Any], path: Path) -> Path:
     from nsl.eval import plot_curve
 
@@ -1058,6 +1081,8 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
             weight_change_table(records),
             "",
         ]
+        if "weight_change" in figures:
+            parts += [f"![where the weights change]({figures['weight_change']})", ""]
     if plan.get("continual"):
         parts += [
             "## The continual sequence (Table 5.3)",

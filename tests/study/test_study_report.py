@@ -342,3 +342,21 @@ def test_the_continual_sequence_with_seeds_gives_seed_means_and_finding_d_their_
     d = {x.key: x for x in findings(rec)}["d"]
     # the base task: 80% before; after the last stage 72, 80, 76 -> lost 8, 0, 4: mean 4.0, t half-width 9.9
     assert d.holds is True and "(mean over 3 seeds +4.0 [-5.9, +13.9], 95% t interval)" in d.ours
+
+
+def test_the_weight_change_table_and_plot_give_each_layer_per_shift(tmp_path):
+    from PIL import Image
+
+    from nsl.study.report import plot_weight_change, weight_change_table
+
+    records = {
+        "weight_change": {
+            "harsh_lighting": {"conv.0": 2.5, "head.0": 0.75},
+            "offset_gripper": {"conv.0": 1.0, "head.0": 3.0},
+        }
+    }
+    rows = [ln.split("|")[1:-1] for ln in weight_change_table(records).splitlines()[2:]]
+    assert [[c.strip() for c in r] for r in rows] == [["conv.0", "2.50", "1.00"], ["head.0", "0.75", "3.00"]]
+    png = plot_weight_change(records, tmp_path / "wc.png")
+    assert Image.open(png).size[0] > 400
+    assert "no weight changes yet" in weight_change_table({})

@@ -38,7 +38,7 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
     folder = mini_run / "studies" / "mini"
     text = (folder / "report.md").read_text()
     records = json.loads((folder / "records.json").read_text())
-    for png in ("tiers.png", "curves.png", "early_stop.png"):
+    for png in ("tiers.png", "curves.png", "early_stop.png", "weight_change.png"):
         assert (folder / png).stat().st_size > 1000
     # Table 5.1: base task + 2 shifts; the drop equals base minus shift success, from the catalog's evaluations.
     challenge = _table(text, "## Challenge table")
@@ -92,7 +92,7 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
     assert all(v > 0 for v in norm.values())  # ten steps changed every layer
     raw = layer_distances(base_dir, ft.path)
     assert wc["harsh_lighting"] == pytest.approx({k: raw[k] / norm[k] for k in norm})
-    assert "## Where the weights change (Fig. 5.8)" in text
+    assert "## Where the weights change (Fig. 5.8)" in text and "![where the weights change](weight_change.png)" in text
     # Table 5.3: one row per stage plus the base task; the matrix has base policy + 2 stages
     assert [r[0] for r in _table(text, "## The continual sequence")] == [
         "harsh lighting",
