@@ -28,7 +28,8 @@ from typing import TYPE_CHECKING
 from nsl.lazy import lazy_exports
 
 _EXPORTS = {
-    "algorithm": ("Algorithm", "NoOptions", "find_learner", "learner_names", "parse_learner", "register_learner"),
+    "algorithm": ("Algorithm", "NoOptions"),
+    "registry": ("find_learner", "learner_names", "parse_learner", "register_learner"),
     "cem": ("cem_maximize", "full_actions", "noise_from_generator", "noise_from_rngs"),
     "checkpoint": (
         "CHECKPOINT_FORMAT",
@@ -56,14 +57,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 
 
 if TYPE_CHECKING:  # static analysers see the eager imports
-    from .algorithm import (  # noqa: F401
-        Algorithm,
-        NoOptions,
-        find_learner,
-        learner_names,
-        parse_learner,
-        register_learner,
-    )
+    from .algorithm import Algorithm, NoOptions  # noqa: F401
     from .cem import cem_maximize, full_actions, noise_from_generator, noise_from_rngs  # noqa: F401
     from .checkpoint import (  # noqa: F401
         CHECKPOINT_FORMAT,
@@ -83,5 +77,6 @@ if TYPE_CHECKING:  # static analysers see the eager imports
     from .networks import QNetwork  # noqa: F401
     from .policy import CEMPolicy, load_policy  # noqa: F401
     from .qtopt import Learner, QTOpt, bellman_target, update  # noqa: F401
+    from .registry import find_learner, learner_names, parse_learner, register_learner  # noqa: F401
     from .sampler import ArraySampler, Sampler, synthetic_sampler  # noqa: F401
     from .training import FINAL_DIR, TrainResult, inherited_settings, train  # noqa: F401

@@ -155,7 +155,7 @@ def load_policy(
 
     ``precision`` is the precision it acts in (``fp32``, ``bf16`` or ``auto``), whatever it was trained in.
     """
-    from .algorithm import find_learner
+    from .registry import find_learner
 
     ckpt = load_checkpoint(Path(checkpoint_dir))
     training = TrainConfig.from_dict(ckpt.config["training"])
@@ -167,13 +167,12 @@ def load_policy(
     path = Path(checkpoint_dir)
     # The content id, not the path: a dataset's metadata (and so its version hash) holds this description.
     info = {"checkpoint_id": checkpoint_id(path), "step": ckpt.step}
-    algo, _ = find_learner(training.learner)  # how its learner acts (the built-in learners: CEM over Q)
-    return algo.policy(
-        ckpt.net,
-        cem,
-        epsilon=epsilon,
-        name=f"ckpt:{path.name}",
-        info=info,
-        action_noise=action_noise,
-        precision=precision,
-    )
+    algo, _ = find_learner(training.learner)  # how its learner acts (None: CEM over Q, the built-in learners')
+    kwargs = {
+        "epsilon": epsilon,
+        "name": f"ckpt:{path.name}",
+        "info": info,
+        "action_noise": action_noise,
+        "precision": precision,
+    }
+    return algo.policy(ckpt.net, cem, **kwargs) or CEMPolicy(ckpt.net, cem, **kwargs)

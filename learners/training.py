@@ -47,7 +47,7 @@ from nsl.errors import ConfigError
 from nsl.progress import progress_bar
 from nsl.workspace import atomic_write_bytes
 
-from .algorithm import Algorithm, find_learner
+from .algorithm import Algorithm
 from .checkpoint import (
     TRAINER_FILE,
     Checkpoint,
@@ -64,6 +64,7 @@ from .networks import QNetwork, grow_column, reinit_head, shrink_perturb
 from .policy import CEMPolicy
 from .precision import resolve_precision
 from .qtopt import batch_to_torch
+from .registry import find_learner
 from .sampler import Sampler
 
 DEFAULT_LR = 3e-4
@@ -311,9 +312,8 @@ def _evaluate(
     evals: list,
 ) -> bool:
     snapshot = copy.deepcopy(online).eval()
-    policy = algo.policy(
-        snapshot, cfg.cem, name=f"{out.name}@{step}", info={"run": str(out), "step": step}, precision=cfg.precision
-    )
+    kwargs = {"name": f"{out.name}@{step}", "info": {"run": str(out), "step": step}, "precision": cfg.precision}
+    policy = algo.policy(snapshot, cfg.cem, **kwargs) or CEMPolicy(snapshot, cfg.cem, **kwargs)
     result = dict(eval_fn(step, policy) or {})
     evals.append({"step": step, **result})
     log.eval(step, result)

@@ -126,7 +126,7 @@ def online(config: OnlineConfig, name: str = "online", *, progress: bool = True)
         rate = evaluate_service.evaluate(
             [policy],
             EvaluateOptions(
-                shift=config.shift, episodes=config.eval_episodes, seed=config.eval_seed, workers=config.workers
+                shift=config.shift, episodes=config.eval_episodes, seed=config.eval_scenes, workers=config.workers
             ),
             progress=progress,
             source="online",

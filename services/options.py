@@ -276,7 +276,7 @@ class OnlineConfig:
     learner: str = option(TrainConfig.learner, "the offline learner of every round (nsl train --learner)")
     epsilon: float = option(0.1, "exploration while collecting: chance of a random action per step")
     eval_episodes: int = option(EvalConfig.episodes, "evaluation episodes after each round")
-    eval_seed: int = option(EvalConfig.seed, "scene seed of the evaluations (nsl eval --seed)")
+    eval_scenes: int = option(EvalConfig.seed, "scene seed of the evaluations (nsl eval --seed)")
     workers: int = option(1, "simulator processes for collection and evaluation")
     seed: int = option(0, "round i collects with scene seed SEED + i; every round trains with SEED")
 

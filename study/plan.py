@@ -310,7 +310,7 @@ def validate(plan: Plan) -> None:
 
     if plan.precision not in PRECISIONS:
         raise ConfigError(f"plan precision = {plan.precision!r} is unknown; use one of {', '.join(PRECISIONS)}")
-    from nsl.learners.algorithm import learner_names, parse_learner
+    from nsl.learners.registry import learner_names, parse_learner
 
     learner, _ = parse_learner(str(plan.learner))
     if learner not in learner_names():

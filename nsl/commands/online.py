@@ -22,7 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_field(p, c, "init")
     add_field(p, c, "base_data", action="append", default=None)
     p.add_argument("--name", default="online", help="run name (folder under $NSL_HOME/runs, dataset prefix)")
-    for name in ("rounds", "episodes", "steps", "ratio", "eval_episodes", "eval_seed", "epsilon", "workers", "seed"):
+    for name in ("rounds", "episodes", "steps", "ratio", "eval_episodes", "eval_scenes", "epsilon", "workers", "seed"):
         add_field(p, c, name)
     add_field(p, c, "method", choices=("ft", "new_head"))
     add_field(p, c, "learner")

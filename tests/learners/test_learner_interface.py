@@ -177,7 +177,7 @@ class _Bandit(Algorithm):
 def test_a_registered_learner_trains_records_its_package_and_is_refused_where_unsupported(
     random_sampler, parent_checkpoint, tmp_path, monkeypatch
 ):
-    monkeypatch.setattr("nsl.learners.algorithm._REGISTERED", {})  # forget it afterwards
+    monkeypatch.setattr("nsl.learners.registry._REGISTERED", {})  # forget it afterwards
     register_learner(_Bandit(), {"package": "nsl-tests-bandit", "version": "1.2.0"})
     assert "tests.bandit" in learner_names() and learner_names()[:2] == ["qtopt", "iql"]
     cfg = tiny_train(steps=4, learner="tests.bandit", learner_options={"scale": 0.5})
