@@ -168,7 +168,7 @@ def load_policy(
     # The content id, not the path: a dataset's metadata (and so its version hash) holds this description.
     info = {"checkpoint_id": checkpoint_id(path), "step": ckpt.step}
     algo, _ = find_learner(training.learner)  # how its learner acts (None: CEM over Q, the built-in learners')
-    kwargs = {
+    kwargs: dict[str, Any] = {
         "epsilon": epsilon,
         "name": f"ckpt:{path.name}",
         "info": info,
