@@ -312,7 +312,11 @@ def _evaluate(
     evals: list,
 ) -> bool:
     snapshot = copy.deepcopy(online).eval()
-    kwargs: dict[str, Any] = {"name": f"{out.name}@{step}", "info": {"run": str(out), "step": step}, "precision": cfg.precision}
+    kwargs: dict[str, Any] = {
+        "name": f"{out.name}@{step}",
+        "info": {"run": str(out), "step": step},
+        "precision": cfg.precision,
+    }
     policy = algo.policy(snapshot, cfg.cem, **kwargs) or CEMPolicy(snapshot, cfg.cem, **kwargs)
     result = dict(eval_fn(step, policy) or {})
     evals.append({"step": step, **result})
