@@ -16,6 +16,8 @@ Public surface (other folders import these from ``nsl.learners`` only)::
     Checkpoint, load_checkpoint, save_checkpoint, checkpoint_config, checkpoint_id, read_config
     CEMPolicy, load_policy                             # a checkpoint acting in the collectors
     layer_distances                                    # where a fine-tune changed the weights (Fig. 5.8)
+    FeatureConfig, train_features, encoder_features    # supervised features (Table 5.2's ImageNet column)
+    load_encoder
 
 Each name loads its module on first use, so ``from nsl.learners import TrainConfig``
 loads no PyTorch.  The learner knows no simulator: it never imports ``nsl.collectors`` or ``nsl.eval``.
@@ -44,7 +46,16 @@ _EXPORTS = {
         "read_config",
         "save_checkpoint",
     ),
-    "config": ("FINE_TUNE_CONSERVATIVE", "FINE_TUNE_STEPS", "METHODS", "CemConfig", "NetConfig", "TrainConfig"),
+    "config": (
+        "FINE_TUNE_CONSERVATIVE",
+        "FINE_TUNE_STEPS",
+        "METHODS",
+        "CemConfig",
+        "FeatureConfig",
+        "NetConfig",
+        "TrainConfig",
+    ),
+    "features": ("encoder_features", "load_encoder", "train_features"),
     "networks": ("QNetwork",),
     "policy": ("CEMPolicy", "load_policy"),
     "iql": ("IQL", "IQLOptions"),
@@ -72,7 +83,16 @@ if TYPE_CHECKING:  # static analysers see the eager imports
         read_config,
         save_checkpoint,
     )
-    from .config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_STEPS, METHODS, CemConfig, NetConfig, TrainConfig  # noqa: F401
+    from .config import (  # noqa: F401
+        FINE_TUNE_CONSERVATIVE,
+        FINE_TUNE_STEPS,
+        METHODS,
+        CemConfig,
+        FeatureConfig,
+        NetConfig,
+        TrainConfig,
+    )
+    from .features import encoder_features, load_encoder, train_features  # noqa: F401
     from .iql import IQL, IQLOptions  # noqa: F401
     from .networks import QNetwork  # noqa: F401
     from .policy import CEMPolicy, load_policy  # noqa: F401

@@ -22,7 +22,10 @@ from nsl.keys import ACTION_DIM, STATE_DIM
 
 POOLS = ("flatten", "max", "spatial")
 NORMS = ("none", "group")
-METHODS = ("scratch", "ft", "new_head", "pnn", "ft_pnn")
+METHODS = ("scratch", "ft", "new_head", "new_head_frozen", "pnn", "ft_pnn")
+# The conv trunk of a column: the network's own ("conv"), or a torchvision ResNet (weights imported with
+# ``nsl features --encoder PATH``; learners/features.py).  A ResNet's output is 1/32 of the image's side.
+ENCODERS = ("conv", "resnet18", "resnet34", "resnet50")
 FINE_TUNE_LR_FACTOR = 0.25  # fine-tuning learning rate = 25% of the parent's (the study's recipe)
 # The fine-tuning recipe's other two settings, chosen on selection scenes: the conservative term's weight and the
 # number of gradient steps (docs/experiments/conservative-fine-tune.md).
@@ -52,6 +55,7 @@ class NetConfig:
     action_dims: tuple[int, ...] = (0, 1, 3, 5)  # action components the network reads and CEM searches
     default_action: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, -1.0, -1.0)  # values of the other components
     columns: int = 1  # progressive-network columns; 1 is a plain network, k > 1 freezes the first k-1
+    encoder: str = "conv"  # the trunk: "conv" (conv_channels, conv_strides) or a torchvision ResNet (ENCODERS)
 
     def __post_init__(self) -> None:
         for name in ("conv_channels", "conv_strides", "action_dims", "default_action"):
@@ -96,22 +100,38 @@ class NetConfig:
             )
         if self.columns < 1:
             raise ConfigError(f"net.columns {self.columns} must be at least 1")
+        if self.encoder not in ENCODERS:
+            raise ConfigError(f"net.encoder {self.encoder!r} is unknown; use one of {ENCODERS}")
+        if self.encoder != "conv" and (self.columns > 1 or self.coord_channels or self.pool == "spatial"):
+            raise ConfigError(
+                f"net.encoder {self.encoder!r} reads the three colour channels and has no progressive-network "
+                "laterals; use it with coord_channels false, one column and pool flatten or max"
+            )
 
     @property
     def feature_dim(self) -> int:
         """Length of the trunk's output vector."""
-        return self.conv_channels[-1] * (self.feature_size**2 if self.pool == "flatten" else 1)
+        return self.feature_channels * (self.feature_size**2 if self.pool == "flatten" else 1)
+
+    @property
+    def feature_channels(self) -> int:
+        """Channels of the trunk's output feature map."""
+        return {"resnet18": 512, "resnet34": 512, "resnet50": 2048}.get(self.encoder, self.conv_channels[-1])
 
     @property
     def feature_size(self) -> int:
         """Side length of the trunk's output feature map."""
         n = self.image_size
-        for s in self.conv_strides:
+        strides = (2,) * 5 if self.encoder != "conv" else self.conv_strides  # a ResNet halves it five times
+        for s in strides:
             n = (n + 1) // s if s == 2 else n
         return n
 
     def to_dict(self) -> dict[str, Any]:
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+        d = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+        if d["encoder"] == "conv":
+            del d["encoder"]  # absent means the conv trunk: architectures (and checkpoint ids) made before hold
+        return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> NetConfig:
@@ -251,6 +271,28 @@ class TrainConfig:
 
     def replace(self, **changes: Any) -> TrainConfig:
         return type(self)(**{**{f.name: getattr(self, f.name) for f in fields(self)}, **changes})
+
+
+@dataclass(frozen=True)
+class FeatureConfig:
+    """Training the trunk as an image classifier."""
+
+    steps: int = 3000  # gradient steps
+    batch_size: int = 128
+    lr: float = 1e-3  # Adam
+    weight_decay: float = 1e-4
+    augment_crop: int = 4  # random-shift augmentation (as in Q-learning)
+    holdout: int = 2  # frames per class kept out of training to measure accuracy
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.steps < 1 or self.batch_size < 1 or self.holdout < 0:
+            raise ConfigError(
+                f"features: steps {self.steps} and batch_size {self.batch_size} must be >= 1, holdout "
+                f"{self.holdout} >= 0"
+            )
+        if not 0 < self.lr < 1:
+            raise ConfigError(f"features: learning rate {self.lr} is out of range; use e.g. 1e-3")
 
 
 def _known(cls: type, d: dict[str, Any], what: str) -> dict[str, Any]:

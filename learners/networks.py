@@ -29,6 +29,7 @@ compute exactly what they computed before.
 from __future__ import annotations
 
 import copy
+from collections import OrderedDict
 
 import torch
 from torch import nn
@@ -50,6 +51,27 @@ HEAD_PREFIXES = (
 )
 
 
+IMAGENET_MEAN = torch.tensor([0.485, 0.456, 0.406]).view(1, 3, 1, 1)
+IMAGENET_STD = torch.tensor([0.229, 0.224, 0.225]).view(1, 3, 1, 1)
+
+
+def resnet_trunk(name: str) -> nn.Sequential:
+    """A torchvision ResNet without its pooling and classifier, its batch norms frozen (per sample, as CEM needs).
+
+    Its parameter names are torchvision's (``conv1.weight``, ``layer1.0.bn1.running_mean``, ...), so an
+    ImageNet state dict loads into it (learners/features.py).
+    """
+    import torchvision
+    from torchvision.ops.misc import FrozenBatchNorm2d
+
+    m = getattr(torchvision.models, name)(weights=None, norm_layer=FrozenBatchNorm2d)
+    return nn.Sequential(
+        OrderedDict(
+            (k, getattr(m, k)) for k in ("conv1", "bn1", "relu", "maxpool", "layer1", "layer2", "layer3", "layer4")
+        )
+    )
+
+
 def coordinate_planes(n: int) -> torch.Tensor:
     """(1, 2, n, n): x and y in [-1, 1] over an n x n grid (CoordConv's extra channels)."""
     ramp = torch.linspace(-1.0, 1.0, n)
@@ -65,10 +87,11 @@ class QColumn(nn.Module):
         super().__init__()
         self.n_lateral = n_lateral
         c_in = 3 + (2 if cfg.coord_channels else 0)
+        self.encoder: nn.Module | None = resnet_trunk(cfg.encoder) if cfg.encoder != "conv" else None
         self.convs = nn.ModuleList()
         self.norms = nn.ModuleList()
         lateral: dict[str, nn.ModuleList] = {}
-        for i, (c, s) in enumerate(zip(cfg.conv_channels, cfg.conv_strides)):
+        for i, (c, s) in enumerate(zip(cfg.conv_channels, cfg.conv_strides) if self.encoder is None else ()):
             self.convs.append(nn.Conv2d(c_in, c, 3, s, 1))
             self.norms.append(nn.GroupNorm(min(8, c), c) if cfg.norm == "group" else nn.Identity())
             if i > 0 and n_lateral:
@@ -79,7 +102,7 @@ class QColumn(nn.Module):
         h = cfg.hidden
         if cfg.pool == "spatial":
             # per position: W_f [features, coordinates] + W_s state (once per state), then + W_a action
-            self.state_fc: nn.Module = nn.Conv2d(cfg.conv_channels[-1] + 2, h, 1)
+            self.state_fc: nn.Module = nn.Conv2d(cfg.feature_channels + 2, h, 1)
             self.state_proj = nn.Linear(cfg.state_dim, h, bias=False)
             self.spatial_fc = nn.Conv2d(h, h, 1)
             self.register_buffer("coords", coordinate_planes(cfg.feature_size), persistent=False)
@@ -103,6 +126,9 @@ class QColumn(nn.Module):
     def encode(self, x: torch.Tensor, state: torch.Tensor, prev: list[dict]) -> dict:
         """Per-state activations: ``convs`` (list), ``flat`` and the context ``ctx`` (B, hidden)."""
         acts = []
+        if self.encoder is not None:  # the ResNet reads ImageNet-normalised colours; x is image - 0.5
+            x = self.encoder((x + 0.5 - IMAGENET_MEAN.to(x.dtype)) / IMAGENET_STD.to(x.dtype))
+            acts.append(x)
         for i, conv in enumerate(self.convs):
             y = conv(x)
             if i > 0 and self.n_lateral:
@@ -216,6 +242,13 @@ def head_rank(name: str) -> int | None:
 def is_head_parameter(name: str) -> bool:
     """True for a parameter of a column's head (everything after the conv trunk)."""
     return head_rank(name) is not None
+
+
+def freeze_trunk(net: QNetwork) -> None:
+    """Stop training the last column's trunk (``new_head_frozen``): only its head learns."""
+    for name, p in net.columns[-1].named_parameters():
+        if not is_head_parameter(name):
+            p.requires_grad_(False)
 
 
 def reinit_head(net: QNetwork) -> None:

@@ -155,7 +155,7 @@ def load_policy(
 
     ``precision`` is the precision it acts in (``fp32``, ``bf16`` or ``auto``), whatever it was trained in.
     """
-    from .registry import find_learner
+    from .registry import acting_policy, find_learner
 
     ckpt = load_checkpoint(Path(checkpoint_dir))
     training = TrainConfig.from_dict(ckpt.config["training"])
@@ -175,4 +175,4 @@ def load_policy(
         "action_noise": action_noise,
         "precision": precision,
     }
-    return algo.policy(ckpt.net, cem, **kwargs) or CEMPolicy(ckpt.net, cem, **kwargs)
+    return acting_policy(algo, ckpt.net, cem, **kwargs)

@@ -15,6 +15,7 @@ Methods (``init_checkpoint`` is the parent):
 * ``scratch``: random initialisation (the parent, if any, only gives the architecture);
 * ``ft``: all parameters from the parent (the study's method);
 * ``new_head``: the parent's conv trunk, a freshly initialised head;
+* ``new_head_frozen``: the same with the trunk frozen (supervised features fine-tuned with their trunk fixed);
 * ``pnn``: a progressive network: the parent's columns frozen plus a new column with lateral connections;
 * ``ft_pnn``: the same, with the new column initialised from the parent's last column.
 
@@ -60,11 +61,11 @@ from .checkpoint import (
     write_json,
 )
 from .config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_LR_FACTOR, METHODS, NetConfig, TrainConfig
-from .networks import QNetwork, grow_column, reinit_head, shrink_perturb
+from .networks import QNetwork, freeze_trunk, grow_column, reinit_head, shrink_perturb
 from .policy import CEMPolicy
 from .precision import resolve_precision
 from .qtopt import batch_to_torch
-from .registry import find_learner
+from .registry import acting_policy, find_learner
 from .sampler import Sampler
 
 DEFAULT_LR = 3e-4
@@ -139,8 +140,10 @@ def initial_network(method: str, parent: Checkpoint | None, net: NetConfig | Non
     base = copy.deepcopy(parent.net).train()
     if method == "ft":
         return base
-    if method == "new_head":
+    if method in ("new_head", "new_head_frozen"):
         reinit_head(base)
+        if method == "new_head_frozen":
+            freeze_trunk(base)
         return base
     return grow_column(base, copy_last=(method == "ft_pnn")).train()
 
@@ -317,7 +320,7 @@ def _evaluate(
         "info": {"run": str(out), "step": step},
         "precision": cfg.precision,
     }
-    policy = algo.policy(snapshot, cfg.cem, **kwargs) or CEMPolicy(snapshot, cfg.cem, **kwargs)
+    policy = acting_policy(algo, snapshot, cfg.cem, **kwargs)
     result = dict(eval_fn(step, policy) or {})
     evals.append({"step": step, **result})
     log.eval(step, result)

@@ -3,7 +3,7 @@
 The Python API is this package's functions (``nsl.api``, loaded on first use)::
 
     nsl.collect  nsl.train  nsl.evaluate  nsl.report  nsl.continual  nsl.online  nsl.efficiency  nsl.push  nsl.pull
-    nsl.study_run  nsl.study_status  nsl.study_report  nsl.transfer_run  nsl.build_curriculum
+    nsl.features  nsl.study_run  nsl.study_status  nsl.study_report  nsl.transfer_run  nsl.build_curriculum
 
 with their configs (``nsl.CollectConfig``, ``nsl.TrainOptions``, ...) and the
 named scene seeds (``nsl.SELECTION_SCENES``, ...); ``docs/python.md`` walks
@@ -49,6 +49,7 @@ _API = (
     "Curriculum",
     "EfficiencyConfig",
     "EvaluateOptions",
+    "FeaturesConfig",
     "OnlineConfig",
     "StudyRun",
     "TrainOptions",
@@ -61,6 +62,7 @@ _API = (
     "continual",
     "efficiency",
     "evaluate",
+    "features",
     "online",
     "pull",
     "push",

@@ -36,6 +36,7 @@ from nsl.services.options import (
     ContinualConfig,
     EfficiencyConfig,
     EvaluateOptions,
+    FeaturesConfig,
     OnlineConfig,
     TrainOptions,
 )
@@ -43,6 +44,7 @@ from nsl.services.options import (
 if TYPE_CHECKING:
     from nsl.services.continual import ContinualResult
     from nsl.services.evaluate import EvaluationResult
+    from nsl.services.features import FeaturesResult
     from nsl.services.online import OnlineResult
     from nsl.services.share import Pulled, Pushed
     from nsl.services.train import TrainResult
@@ -168,6 +170,17 @@ def online(
         elif key in fields:
             fields[key] = tuple(fields[key])
     return run(_settle(OnlineConfig, config, fields, "online"), name, progress=progress)
+
+
+def features(
+    config: FeaturesConfig | None = None, /, *, name: str = "features", progress: bool = True, **fields: Any
+) -> FeaturesResult:
+    """Supervised features (``nsl features``): the trunk of ``like``'s architecture trained to classify the 899
+    train objects from rendered frames, or a torchvision ResNet from ``encoder=PATH``, catalogued as
+    ``ckpt:NAME``; fine-tune it with ``method="new_head"`` or ``"new_head_frozen"``."""
+    from nsl.services.features import features as run
+
+    return run(_settle(FeaturesConfig, config, fields, "features"), name, progress=progress)
 
 
 def efficiency(

@@ -16,12 +16,19 @@ from typing import Any
 
 from nsl.errors import ConfigError
 from nsl.eval.config import EarlyStopConfig, EvalConfig
-from nsl.learners.config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_LR_FACTOR, FINE_TUNE_STEPS, TrainConfig
+from nsl.learners.config import (
+    FINE_TUNE_CONSERVATIVE,
+    FINE_TUNE_LR_FACTOR,
+    FINE_TUNE_STEPS,
+    FeatureConfig,
+    TrainConfig,
+)
 
 PRECISIONS = ("fp32", "bf16", "auto")  # nsl.learners.precision.PRECISIONS (that module loads torch)
 METHOD_HELP = (
     "ft = fine-tune all parameters of --init (the study's method); scratch = random init; "
-    "new_head = parent's trunk, re-initialised head; pnn = progressive network (frozen parent column "
+    "new_head = parent's trunk, re-initialised head; new_head_frozen = the same with the trunk frozen "
+    "(supervised features, nsl features); pnn = progressive network (frozen parent column "
     "plus a new one); ft_pnn = pnn whose new column starts as a copy of the parent"
 )
 
@@ -282,6 +289,31 @@ class OnlineConfig:
 
 
 @dataclass(frozen=True)
+class FeaturesConfig:
+    """Supervised features (``nsl features``): a trunk trained to classify the train objects, or imported."""
+
+    like: str = option(
+        "ckpt:base",
+        "checkpoint whose architecture and training recipe the features take: fine-tunes from them keep its "
+        "n-step and crop and start at 25% of its rate, as fine-tunes of it do",
+    )
+    encoder: str | None = option(
+        None,
+        "a torchvision ResNet-18/34/50 state dict on disk (e.g. real ImageNet weights): the trunk is that ResNet, "
+        "not trained here",
+        metavar="PATH",
+    )
+    classes: int = option(0, "train objects to tell apart; 0: all 899 (the test objects are never shown)")
+    frames: int = option(
+        24, f"rendered frames per object; the last {FeatureConfig.holdout} of each measure held-out accuracy"
+    )
+    steps: int = option(FeatureConfig.steps, "gradient steps of the classifier")
+    batch_size: int = option(FeatureConfig.batch_size, "frames per step")
+    lr: float = option(FeatureConfig.lr, "the classifier's Adam learning rate")
+    seed: int = option(0, "seed of the frames and of the training (the same seed gives the same weights)")
+
+
+@dataclass(frozen=True)
 class EfficiencyConfig:
     """One sample-efficiency run; saved as RUN/config.json."""
 
@@ -306,6 +338,7 @@ __all__ = [
     "ContinualConfig",
     "EfficiencyConfig",
     "EvaluateOptions",
+    "FeaturesConfig",
     "OnlineConfig",
     "TrainOptions",
     "option",

@@ -169,6 +169,8 @@ def is_done(unit: Unit) -> bool:
         return _checkpoint_at(p["checkpoint"], p["steps"]) is not None
     if unit.kind == "eval":
         return evaluation(p["checkpoint_ref"], p["shift"], p["episodes"], p["seed"]) is not None
+    if unit.kind == "features":
+        return _checkpoint_at(p["checkpoint"], 0) is not None
     raise ConfigError(f"unit {unit.name} has unknown kind {unit.kind!r}")
 
 
@@ -217,6 +219,8 @@ def run_unit(unit: Unit, workers: int = 1, progress: bool = True, register: bool
             out = _train(unit, workers, progress, register)
         elif unit.kind == "eval":
             out = _evaluate(unit, workers, progress, register)
+        elif unit.kind == "features":
+            out = _features(unit, progress, register)
         else:
             raise ConfigError(f"unit {unit.name} has unknown kind {unit.kind!r}")
     finally:
@@ -230,7 +234,7 @@ def prepare_unit(unit: Unit) -> Unit:
     from dataclasses import replace
 
     p = unit.params
-    refs = [p.get("policy_ref"), p.get("init_ref"), p.get("checkpoint_ref")]
+    refs = [p.get("policy_ref"), p.get("init_ref"), p.get("checkpoint_ref"), p.get("like_ref")]
     refs = [r for r in refs if isinstance(r, str) and (r.startswith("ckpt:") or r == "base")]
     if not refs:
         return unit
@@ -259,6 +263,10 @@ def register_unit(unit: Unit, summary: Mapping[str, Any]) -> None:
         from nsl.services.evaluate import store_evaluation
 
         store_evaluation(made)
+    elif unit.kind == "features":
+        from nsl.services.features import register_features
+
+        register_features(unit.params["checkpoint"], Path(made))
 
 
 def _collect(unit: Unit, workers: int, progress: bool, register: bool = True) -> dict[str, Any]:
@@ -307,9 +315,9 @@ def _data_mix(p: Mapping[str, Any]) -> list[tuple[str, float]]:
                 "run the study again to collect it"
             )
         mix.append((refs[-1] if b["hash"] else f"{refs[-1]}:{b['episodes']}", float(b["weight"])))
-    t = p["target"]
-    if t is not None:  # None: a run on base data alone (the no_target baseline)
-        mix.append((f"{t['dataset']}:{t['tier']}", float(t["weight"])))
+    for t in [p["target"], *p.get("more_targets", ())]:
+        if t is not None:  # None: a run on base data alone (the no_target baseline)
+            mix.append((f"{t['dataset']}:{t['tier']}", float(t["weight"])))
     return mix
 
 
@@ -354,6 +362,23 @@ def _train(unit: Unit, workers: int, progress: bool, register: bool = True) -> d
     return {"checkpoint": result.checkpoint, "id": result.id, **({} if register else {"made": result.made})}
 
 
+def _features(unit: Unit, progress: bool, register: bool = True) -> dict[str, Any]:
+    """``nsl features``: the supervised features in the base's architecture (or the plan's ResNet encoder)."""
+    from nsl.services.features import FeaturesConfig, features
+
+    p = unit.params
+    config = FeaturesConfig(
+        like=p["like_ref"],
+        encoder=p["encoder"],
+        classes=p["classes"],
+        frames=p["frames"],
+        steps=p["steps"],
+        seed=p["seed"],
+    )
+    result = features(config, p["checkpoint"], progress=progress, register=register)
+    return {"checkpoint": result.checkpoint, "id": result.id, **({} if register else {"made": str(result.path)})}
+
+
 def _evaluate(unit: Unit, workers: int, progress: bool, register: bool = True) -> dict[str, Any]:
     """``nsl eval``: success with a Wilson interval on test objects, stored in the catalog."""
     from nsl.services.evaluate import EvaluateOptions, evaluate
@@ -386,7 +411,8 @@ def unit_trees(unit: Unit) -> dict[str, str]:
     if unit.kind == "collect":
         names = [p["dataset"]]
     elif unit.kind == "train":
-        names = [b["dataset"] for b in p["base"]] + ([p["target"]["dataset"]] if p.get("target") else [])
+        targets = [p["target"], *p.get("more_targets", ())] if p.get("target") else []
+        names = [b["dataset"] for b in p["base"]] + [t["dataset"] for t in targets]
     trees = {}
     for name in names:
         for ref in _versions_with_hash(name, None):
@@ -435,6 +461,9 @@ def run_staged_unit(unit: Unit, workers: int = 1, progress: bool = True) -> dict
     elif unit.kind == "train" and made is not None:
         trees = [relative(made.run_dir, home, f"run {made.name}")]
         made = replace(made, run_dir=Path(trees[0]), final=Path(relative(made.final, home, f"run {made.name}")))
+    elif unit.kind == "features" and made is not None:
+        trees = [relative(Path(made).parent, home, f"run {p['checkpoint']}")]
+        made = relative(Path(made), home, f"run {p['checkpoint']}")
     for rel in trees:
         s.push(home, rel)
     return {**out, "made": made, "trees": trees}
@@ -454,4 +483,6 @@ def register_staged_unit(unit: Unit, summary: Mapping[str, Any], store: str) -> 
     made = summary.get("made")
     if unit.kind == "train" and made is not None:
         made = replace(made, run_dir=home / made.run_dir, final=home / made.final)
+    elif unit.kind == "features" and made is not None:
+        made = str(home / made)
     register_unit(unit, {**summary, "made": made})

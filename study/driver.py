@@ -24,9 +24,11 @@ from .plan import Plan, load_plan, parse_plan
 from .report import (
     RECORDS_FILE,
     REPORT_FILE,
+    count,
     gather,
     plot_curves,
     plot_early_stop,
+    plot_online,
     plot_tiers,
     plot_weight_change,
     render,
@@ -299,6 +301,8 @@ def write_study_report(name: str) -> Path:
         figures["early_stop"] = plot_early_stop(records, folder / "early_stop.png").name
     if records.get("weight_change"):
         figures["weight_change"] = plot_weight_change(records, folder / "weight_change.png").name
+    if records.get("online") and any(count(x) for r in records["online"].values() for x in r["success"][1:]):
+        figures["online"] = plot_online(records, folder / "online.png").name
     text = render(records, read_status(folder / STATUS_FILE), figures)
     workspace.atomic_write_bytes(folder / REPORT_FILE, (text + "\n").encode())
     return folder / REPORT_FILE

@@ -32,11 +32,17 @@ UNIT_OVERHEAD_S = 1.5  # per unit run in-process: catalog, policy loading, sampl
 SCRIPTED_EPISODES_PER_S = 25.0  # oracle/random collection, 2 simulator processes
 CHECKPOINT_EPISODES_PER_S = 25.0  # CEM-policy collection (with epsilon), 2 processes, 8 envs each
 EVAL_EPISODES_PER_S = 35.0  # CEM-policy evaluation, 2 processes, 8 envs each
-STEPS_PER_S = {"ft": 11.0, "new_head": 11.0, "scratch": 11.0, "pnn": 5.0, "ft_pnn": 5.0}
+STEPS_PER_S = {"ft": 11.0, "new_head": 11.0, "new_head_frozen": 11.0, "scratch": 11.0, "pnn": 5.0, "ft_pnn": 5.0}
 # Training units with precision bf16 (or auto on a CPU with bfloat16): the `full` study's bf16 fine-tunes took 73-80 s
 # for 2,000 steps on one thread each (25-27 steps/s, two units at a time, AVX-512 BF16, no AMX), where its float32
 # units had logged 12-13 steps/s; `nsl bench learner` gives 1.6-1.7x in alternating rounds.  Rounded down.
 BF16_STEP_SPEEDUP = 1.8
+# Supervised features (nsl features): one scene compiled per train object, then its frames rendered; classifier
+# steps of 128 frames through the base's trunk.  Measured with `nsl features` (see docs/study.md).
+TRAIN_OBJECTS = 899
+OBJECT_SCENE_S = 0.02
+OBJECT_FRAME_S = 0.002
+FEATURE_STEPS_PER_S = 10.0
 IMAGE_CACHE_FRAMES_PER_S = 8_000.0  # first use of a dataset version: decode its PNG frames once
 FRAMES_PER_EPISODE = 8
 
@@ -70,6 +76,12 @@ def unit_seconds(unit: Unit) -> float:
             points = p["steps"] // m["every"] + 1
             seconds += points * (m["episodes"] + m["base_episodes"]) / EVAL_EPISODES_PER_S
         return seconds
+    if unit.kind == "features":
+        if p.get("encoder"):
+            return UNIT_OVERHEAD_S
+        objects = p["classes"] or TRAIN_OBJECTS
+        render = objects * (OBJECT_SCENE_S + p["frames"] * OBJECT_FRAME_S)
+        return UNIT_OVERHEAD_S + render + p["steps"] / FEATURE_STEPS_PER_S
     return UNIT_OVERHEAD_S
 
 

@@ -19,6 +19,9 @@ Sections (see ``study/plans/small.toml`` for a commented example)::
     [continual]                        Table 5.3: the sequence, episodes and steps per stage
     [curves]                           Figs. 5.4/5.9: methods on one shift, success over steps, seeds
     [early_stop]                       Fig. 5.7: one shift trained past its best point; criteria
+    [online]                           Figs. 5.10/5.11: online fine-tuning in rounds, round 1's method, ratios
+    [supervised]                       Table 5.2's ImageNet column: the supervised features the baselines
+                                       ``supervised`` and ``supervised_frozen`` fine-tune (nsl features)
 """
 
 from __future__ import annotations
@@ -32,12 +35,15 @@ from typing import Any
 from nsl.errors import ConfigError, UnknownReferenceError, unknown
 from nsl.scenes import REPORTING_SCENES, SELECTION_SCENES
 
-SHIPPED = ("tiny", "small", "full", "full-seeds", "full-sequence", "paper")
+SHIPPED = ("tiny", "small", "full", "full-seeds", "full-sequence", "online", "paper")
 BASE_DATA_SOURCES = ("checkpoint", "plan")
 # Baselines that are not a fine-tuning method of their own: what each one leaves out separates a cause of the gain.
 #   scratch_target  random initialisation, trained on the target data alone (no base half)
 #   no_target       the base fine-tuned with the same recipe and steps on the base data alone (no target data)
-STUDY_BASELINES = ("scratch_target", "no_target")
+#   supervised      supervised features ([supervised], nsl features) with a fresh head, fine-tuned like the others
+#   supervised_frozen  the same with the features frozen: only the head learns (Table 5.2's ImageNet column)
+STUDY_BASELINES = ("scratch_target", "no_target", "supervised", "supervised_frozen")
+SUPERVISED_BASELINES = {"supervised": "new_head", "supervised_frozen": "new_head_frozen"}  # baseline -> method
 
 
 @dataclass(frozen=True)
@@ -134,6 +140,33 @@ class EarlyStop:
 
 
 @dataclass(frozen=True)
+class Online:
+    """Online fine-tuning in rounds (Sec. 5.10.2): the policy keeps collecting in the target shift, and each round
+    fine-tunes the last round's policy on every round's data so far, mixed with base data (``nsl online``)."""
+
+    shift: str = "transparent_objects"
+    rounds: int = 6  # rounds of collection and fine-tuning
+    episodes: int = 800  # grasps per round (round 1's are the base policy's collection: at most collect.episodes)
+    steps: int = 2000  # gradient steps per round
+    ratio: float = 0.5  # target data's share of each batch in Fig. 5.10's runs
+    methods: tuple[str, ...] = ("ft", "new_head")  # round 1's method (Fig. 5.10); later rounds continue with ft
+    ratios: tuple[float, ...] = (0.01, 0.24, 0.44, 0.71, 0.99)  # Fig. 5.11: target shares, with ft
+    seed: int = 0  # training seed of every round
+
+
+@dataclass(frozen=True)
+class Supervised:
+    """The supervised features (``nsl features``): the trunk of the base's architecture trained to classify the
+    train objects from rendered frames (the project's ImageNet), or a torchvision ResNet from a file."""
+
+    classes: int = 0  # train objects to tell apart (0: all 899)
+    frames: int = 24  # rendered frames per object
+    steps: int = 3000  # classifier gradient steps
+    seed: int = 0
+    encoder: str | None = None  # a torchvision ResNet state dict on disk instead (e.g. ImageNet weights)
+
+
+@dataclass(frozen=True)
 class Plan:
     name: str  # default study name (folder $NSL_HOME/studies/NAME)
     base: str = "ckpt:base"  # the base checkpoint
@@ -155,11 +188,16 @@ class Plan:
     continual: Continual | None = field(default_factory=Continual)
     curves: Curves | None = field(default_factory=Curves)
     early_stop: EarlyStop | None = field(default_factory=EarlyStop)
+    supervised: Supervised | None = None  # set when a supervised baseline is asked for (defaults if not given)
+    online: Online | None = None  # online fine-tuning in rounds (off unless the plan has [online])
     source: str = ""  # where the plan was read from (not part of its identity)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d.pop("source")
+        for key in ("supervised", "online"):
+            if d[key] is None:
+                del d[key]  # an absent section: plans made before it keep their record
         return d
 
 
@@ -171,6 +209,8 @@ SECTIONS = {
     "continual": Continual,
     "curves": Curves,
     "early_stop": EarlyStop,
+    "supervised": Supervised,
+    "online": Online,
 }
 
 
@@ -203,7 +243,7 @@ def parse_plan(data: dict[str, Any], source: str = "", default_name: str = "stud
     for key, cls in SECTIONS.items():
         if key not in data:
             continue
-        if data[key] in (False, None) and key in ("continual", "curves", "early_stop"):
+        if data[key] in (False, None) and key in ("continual", "curves", "early_stop", "online"):
             sections[key] = None  # `continual = false` switches an experiment off
             continue
         table = data[key]
@@ -214,6 +254,9 @@ def parse_plan(data: dict[str, Any], source: str = "", default_name: str = "stud
         sections[key] = _build(cls, table, key)
     top.setdefault("name", default_name)
     plan = _build(Plan, {**top}, "plan")
+    baselines = sections["finetune"].baselines if "finetune" in sections else plan.finetune.baselines
+    if "supervised" not in sections and set(baselines) & set(SUPERVISED_BASELINES):
+        sections["supervised"] = Supervised()
     plan = Plan(**{**{f.name: getattr(plan, f.name) for f in fields(Plan)}, **sections, "source": source})
     validate(plan)
     return plan
@@ -372,6 +415,36 @@ def validate(plan: Plan) -> None:
             _method(m, "finetune.baselines", STUDY_BASELINES)
     if len(set(f.baselines)) != len(f.baselines):
         raise ConfigError(f"plan finetune.baselines = {list(f.baselines)!r} repeats a baseline")
+    if plan.online is not None:
+        o = plan.online
+        _shift(o.shift, "online.shift")
+        for k in ("rounds", "episodes", "steps"):
+            _positive(getattr(o, k), f"online.{k}")
+        if o.episodes > c.episodes:
+            raise ConfigError(
+                f"plan online.episodes = {o.episodes} is above the collection size collect.episodes = {c.episodes} "
+                "(round 1 trains on the base policy's collection)"
+            )
+        for m in o.methods:
+            if m not in ("ft", "new_head"):
+                raise ConfigError(f"plan online.methods has {m!r}; online rounds start with ft or new_head")
+        for r in (o.ratio, *o.ratios):
+            if not isinstance(r, (int, float)) or not 0 < r <= 1:
+                raise ConfigError(f"plan online ratio {r!r} is the target data's share of each batch; use (0, 1]")
+        if not o.methods and not o.ratios:
+            raise ConfigError("plan [online] has no methods and no ratios; name at least one run")
+        if not isinstance(o.seed, int) or o.seed < 0:
+            raise ConfigError(f"plan online.seed = {o.seed!r} must be a seed >= 0")
+    if plan.supervised is not None:
+        sv = plan.supervised
+        for k in ("frames", "steps"):
+            _positive(getattr(sv, k), f"supervised.{k}")
+        if not isinstance(sv.classes, int) or sv.classes < 0:
+            raise ConfigError(f"plan supervised.classes = {sv.classes!r} must be 0 (all train objects) or a count")
+        if sv.encoder is not None and not Path(sv.encoder).is_file():
+            raise ConfigError(
+                f"plan supervised.encoder = {sv.encoder!r} is not a file; give a torchvision ResNet state dict's path"
+            )
     if plan.continual is not None:
         s = plan.continual
         seq = [_shift(x, "continual.sequence") for x in s.sequence]

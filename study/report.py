@@ -34,7 +34,7 @@ from nsl.eval import (
 
 from . import reference as ref
 from .plan import Plan
-from .units import BASE_POLICY, continual_tags, no_target_tag, train_tag
+from .units import BASE_POLICY, continual_tags, no_target_tag, online_runs, online_tag, train_tag
 
 REPORT_FILE = "report.md"
 RECORDS_FILE = "records.json"
@@ -194,7 +194,24 @@ def gather(plan: Plan, study: str, evaluation, read_curve_file, checkpoint=None)
         *([plan.curves.shift] if plan.curves else ()),
         *([plan.early_stop.shift] if plan.early_stop else ()),
     ]
+    if plan.online is not None:
+        extra.append(plan.online.shift)
     out["base_policy"] = {s: ev(BASE_POLICY, s) for s in dict.fromkeys(["base", *shifts, *extra])}
+    if plan.online is not None:
+        o = plan.online
+        out["online"] = {
+            online_key(method, ratio): {
+                "method": method,
+                "ratio": ratio,
+                "grasps": [i * o.episodes for i in range(o.rounds + 1)],
+                "success": [ev(BASE_POLICY, o.shift)]
+                + [
+                    ev(online_tag(method, ratio, o.shift, i, o.episodes, o.steps, o.seed), o.shift)
+                    for i in range(1, o.rounds + 1)
+                ],
+            }
+            for method, ratio in online_runs(plan)
+        }
     f = plan.finetune
     top = f.tiers[-1]
     tiers = {}
@@ -316,10 +333,18 @@ def tiers_table(records: Mapping[str, Any]) -> str:
                 "study",
                 f"{study['base']}%",
                 *[f"{study[k]}%" if k in study else "-" for k in tiers],
-                *[f"{study[m]}%" if m in study else "-" for m in baselines],
+                *[_study_baseline(study, m) for m in baselines],
             ]
             lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def _study_baseline(study: Mapping[Any, int], baseline: str) -> str:
+    """The study's figure for one of our baselines at its top tier (``-``: it has none)."""
+    if baseline == "supervised_frozen":
+        return f"{ref.SUPERVISED_FROZEN}%"
+    key = ref.BASELINE_KEYS.get(baseline, baseline)
+    return f"{study[key]}%" if key in study else "-"
 
 
 def tiers_base_table(records: Mapping[str, Any]) -> str:
@@ -628,6 +653,73 @@ def _over_seeds(records: Mapping[str, Any], tier: str) -> str:
     return f" [{100 * (m - half):+.1f}, {100 * (m + half):+.1f}] (mean over {k} seeds {100 * m:+.1f}, 95% t interval)"
 
 
+def online_key(method: str, ratio: float) -> str:
+    """A run of the online records: ``ft@0.5``."""
+    return f"{method}@{ratio:g}"
+
+
+def online_table(records: Mapping[str, Any]) -> str:
+    """Figs. 5.10/5.11 as a table: each run's success after each round (round 0: the base policy)."""
+    runs = records["online"]
+    grasps = next(iter(runs.values()))["grasps"]
+    head = ["round 1's method", "target share", *[f"{g:,} grasps" for g in grasps]]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    ratio = records["plan"]["online"]["ratio"]
+    for run in sorted(runs.values(), key=lambda r: (r["ratio"] != ratio, r["method"], r["ratio"])):
+        cells = [run["method"], f"{100 * run['ratio']:g}%"]
+        cells += ["-" if (c := count(x)) is None else c.pct() for x in run["success"]]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def online_findings(records: Mapping[str, Any]) -> list[Finding]:
+    """(h) Fig. 5.10: all parameters reach the base's base-task success, a new head does not; (i) Fig. 5.11: more
+    target data adapts faster."""
+    o, runs, out = records["plan"]["online"], records["online"], []
+    base = count(records["base_policy"].get("base"))
+    ft, head = runs.get(online_key("ft", o["ratio"])), runs.get(online_key("new_head", o["ratio"]))
+    if ft is not None and head is not None:
+        last_ft, last_head = count(ft["success"][-1]), count(head["success"][-1])
+        holds, ours = None, "-"
+        if base is not None and last_ft is not None and last_head is not None:
+            reached = [
+                g for g, x in zip(ft["grasps"][1:], ft["success"][1:]) if (c := count(x)) and c.rate >= base.ci[0]
+            ]
+            holds = last_ft.rate >= base.ci[0] and diff_interval(last_ft, last_head)[1] > 0
+            ours = (
+                f"after {ft['grasps'][-1]:,} grasps: all parameters {last_ft.pct()}, new head {last_head.pct()} "
+                f"(difference {points(last_ft, last_head)}); the base's base-task success {base.pct()}, "
+                + (f"first within its interval after {reached[0]:,} grasps" if reached else "not reached")
+            )
+        out.append(
+            Finding(
+                "h",
+                "online rounds with all parameters reach the base policy's base-task success; with a new head they "
+                "stay resolvably below",
+                holds,
+                ours,
+                ref.ONLINE,
+            )
+        )
+    ratios = sorted((r["ratio"], r) for r in runs.values() if r["method"] == "ft" and r["ratio"] in o["ratios"])
+    if len(ratios) >= 2:
+        (lo_r, low), (hi_r, high) = ratios[0], ratios[-1]
+        a, b = pooled(high["success"][1:]), pooled(low["success"][1:])
+        holds_i, ours_i = None, "-"
+        if a is not None and b is not None:
+            d, lo, hi = diff_interval(a, b)
+            holds_i = True if lo > 0 else False if hi < 0 else None
+            ours_i = (
+                f"over rounds 1-{len(high['success']) - 1}: {100 * hi_r:g}% target data {a.pct()} against "
+                f"{100 * lo_r:g}% {b.pct()}, {points(a, b)} points"
+                + ("" if holds_i is not None else f" (not resolvable at {b.episodes} episodes)")
+            )
+        out.append(
+            Finding("i", "more target data in each batch adapts faster (Fig. 5.11)", holds_i, ours_i, ref.ONLINE_RATIO)
+        )
+    return out
+
+
 def findings(records: Mapping[str, Any]) -> list[Finding]:
     """Findings (a)-(e) on our numbers beside the study's, shift by shift in the plan's order."""
     plan = records["plan"]
@@ -765,7 +857,44 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
                 "not measured in the study (its sequence found little forgetting of earlier shifts, Table 5.3)",
             )
         )
+    # (g) RL pre-training beats supervised features at the top tier (Table 5.2's ImageNet column)
+    supervised = [m for m in ("supervised", "supervised_frozen") if m in plan["finetune"]["baselines"]]
+    if supervised:
+        out.append(supervised_finding(records, supervised, top))
+    if records.get("online"):
+        out += online_findings(records)
     return out
+
+
+def supervised_finding(records: Mapping[str, Any], baselines: Sequence[str], top: str) -> Finding:
+    """(g): the fine-tuned RL base against each supervised-features baseline, shift by shift, paired scenes."""
+    parts, lows = [], []
+    for shift, row in records["finetune"].items():
+        ft = pooled(row["tiers"][top])
+        cells = []
+        for m in baselines:
+            sv = pooled(row["baselines"].get(m, []))
+            if ft is None or sv is None:
+                continue
+            lows.append(diff_interval(ft, sv)[1])
+            cells.append(f"{'frozen' if m.endswith('frozen') else 'trained'} {sv.pct()}: {points(ft, sv)}")
+        if cells:
+            parts.append(f"{_pretty(shift)} RL {ft.pct()} against " + ", ".join(cells))
+    expected = len(records["finetune"]) * len(baselines)
+    holds = None if len(lows) < expected else all(lo > 0 for lo in lows)
+    study = ", ".join(
+        f"{_pretty(ref.study_shift(s))} {ref.FINETUNE[ref.study_shift(s)][ref.TOP]}% against "
+        f"{ref.FINETUNE[ref.study_shift(s)]['imagenet']}%"
+        for s in records["finetune"]
+        if ref.study_shift(s) in ref.FINETUNE
+    )
+    return Finding(
+        "g",
+        f"RL pre-training beats supervised features at {top} episodes on every shift (features trained and frozen)",
+        holds,
+        "; ".join(parts) or "-",
+        f"{study}; frozen {ref.SUPERVISED_FROZEN}% ({ref.SUPERVISED_CONCLUSION})",
+    )
 
 
 def study_figures(shifts: Sequence[str], table: Mapping[str, int]) -> list[tuple[str, int | None]]:
@@ -945,6 +1074,50 @@ def plot_curves(records: Mapping[str, Any], path: Path) -> Path:
     return _save(fig, path)
 
 
+def plot_online(records: Mapping[str, Any], path: Path) -> Path:
+    """Figs. 5.10 and 5.11: target success against the grasps collected, per run, with 95% bands; the base policy's
+    base-task success as a line."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    o, runs = records["plan"]["online"], records["online"]
+    panels = [
+        (
+            "Fig. 5.10: round 1's method",
+            [r for r in runs.values() if r["ratio"] == o["ratio"] and r["method"] in o["methods"]],
+        ),
+        (
+            "Fig. 5.11: target share, all parameters",
+            [r for r in runs.values() if r["method"] == "ft" and r["ratio"] in o["ratios"]],
+        ),
+    ]
+    panels = [(t, rs) for t, rs in panels if rs]
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.5 * len(panels), 4.2), sharey=True, squeeze=False)
+    base = count(records["base_policy"].get("base"))
+    for ax, (title, rs) in zip(axes[0], panels):
+        for i, r in enumerate(sorted(rs, key=lambda r: (r["method"], r["ratio"]))):
+            pts = [(g, c) for g, x in zip(r["grasps"], r["success"]) if (c := count(x)) is not None]
+            if not pts:
+                continue
+            x = [g for g, _ in pts]
+            label = r["method"] if title.startswith("Fig. 5.10") else f"{100 * r['ratio']:g}% target"
+            ax.plot(x, [100 * c.rate for _, c in pts], "o-", color=f"C{i % 10}", ms=3, label=label)
+            ax.fill_between(
+                x, [100 * c.ci[0] for _, c in pts], [100 * c.ci[1] for _, c in pts], color=f"C{i % 10}", alpha=0.15
+            )
+        if base is not None:
+            ax.axhline(100 * base.rate, color="k", ls="--", lw=1, label="base policy, base task")
+        ax.set_title(f"{title}\n{_pretty(o['shift'])}")
+        ax.set_xlabel("grasps collected online")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    axes[0][0].set_ylabel("success (%, 95% CI)")
+    axes[0][0].set_ylim(-2, 102)
+    return _save(fig, path)
+
+
 def plot_weight_change(records: Mapping[str, Any], path: Path) -> Path:
     """Fig. 5.8: per layer (trunk to head), each shift's normalised cosine distance as a bar; 1 is the base task."""
     import matplotlib
@@ -1048,8 +1221,10 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
         f"{', '.join(map(str, plan['finetune']['seeds']))} for the top tier and the baselines"
         f"{_lower_tier_seeds(plan['finetune'])}. With several seeds a cell is the seed mean ± its 95% t interval, "
         "then the pooled Wilson interval. Baselines: scratch is a random initialisation with the same data mix, "
-        "scratch_target one on the target data alone, no_target the base fine-tuned on base data alone. "
-        "Success on the shift:",
+        "scratch_target one on the target data alone, no_target the base fine-tuned on base data alone; "
+        "supervised and supervised_frozen are a fresh head on supervised features (the trunk trained to classify "
+        "the train objects from rendered frames, the project's analogue of the study's ImageNet column), the trunk "
+        "trained and frozen. Success on the shift:",
         "",
         tiers_table(records),
         "",
@@ -1083,6 +1258,22 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
         ]
         if "weight_change" in figures:
             parts += [f"![where the weights change]({figures['weight_change']})", ""]
+    if records.get("online"):
+        o = plan["online"]
+        parts += [
+            "## Online fine-tuning (Figs. 5.10, 5.11)",
+            "",
+            f"The policy keeps collecting in {_pretty(o['shift'])}: each round, the last round's policy collects "
+            f"{o['episodes']} grasps (round 1's are the base policy's own collection), and the next policy is "
+            f"fine-tuned from it for {o['steps']} steps on every round's data so far, mixed with base data at the "
+            "target share. Round 1 starts from the base with all parameters (ft) or a new head; later rounds "
+            "continue with all parameters. Success on the shift's reporting scenes:",
+            "",
+            online_table(records),
+            "",
+        ]
+        if "online" in figures:
+            parts += [f"![online fine-tuning]({figures['online']})", ""]
     if plan.get("continual"):
         parts += [
             "## The continual sequence (Table 5.3)",

@@ -13,10 +13,12 @@ Names (``S`` is the study name; datasets and checkpoints are prefixed with it)::
     collect:SHIFT:POLICY                POLICY ('base' or a train tag) collects in SHIFT -> dataset S-shift-by-policy
     train:TAG                           a training run -> checkpoint S-TAG
     eval:POLICY:SHIFT                   an evaluation of a checkpoint on SHIFT (plan's episodes and scene seed)
+    features:features                   supervised features ([supervised], nsl features) -> checkpoint S-features
 
 Train tags: ``ft-SHIFT-nK-kSTEPS-sSEED`` (fine-tune from the base on the first K
 target episodes; ``scratch-...``, ``new_head-...``, ``scratch_target-...`` for the
-baselines, and ``no_target-kSTEPS-sSEED``, the base fine-tuned on base data alone),
+baselines; ``supervised-...`` and ``supervised_frozen-...`` start from the supervised features;
+``no_target-kSTEPS-sSEED``, the base fine-tuned on base data alone),
 ``cI-SHIFT-...`` (continual stage I >= 2, from stage I-1),
 ``curve-METHOD-...`` and ``es-...`` (runs that record a success curve).
 
@@ -26,7 +28,7 @@ scheduler runs it in topological order.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -34,9 +36,10 @@ import networkx as nx
 
 from nsl.errors import ConfigError
 
-from .plan import Plan
+from .plan import SUPERVISED_BASELINES, Plan
 
 BASE_POLICY = "base"  # the policy/checkpoint name of the plan's base checkpoint in unit names
+FEATURES_POLICY = "features"  # the supervised features' checkpoint (a features unit makes it)
 
 
 @dataclass(frozen=True)
@@ -68,6 +71,25 @@ def slug(shift: str) -> str:
 
 def train_tag(method: str, shift: str, episodes: int, steps: int, seed: int, prefix: str | None = None) -> str:
     return f"{prefix or method}-{slug(shift)}-n{episodes}-k{steps}-s{seed}"
+
+
+def online_tag(method: str, ratio: float, shift: str, round_: int, episodes: int, steps: int, seed: int) -> str:
+    """The train tag of online round ``round_`` (1-based): ``online-METHOD-pPERCENT-SHIFT-rI-kSTEPS-sSEED``.
+
+    Round 1 at the fine-tuning mix (half target data) is the offline fine-tune of Table 5.2 on the base policy's
+    first ``episodes`` (its tag, so a plan with both trains it once)."""
+    if round_ == 1 and ratio == 0.5:
+        return train_tag(method, shift, episodes, steps, seed)
+    return f"online-{method}-p{round(100 * ratio)}-{slug(shift)}-r{round_}-k{steps}-s{seed}"
+
+
+def online_runs(plan: Plan) -> list[tuple[str, float]]:
+    """The online runs of a plan as (round 1's method, target share): Fig. 5.10's methods at ``ratio``, then
+    Fig. 5.11's ratios with ``ft`` (a run both need is one run)."""
+    o = plan.online
+    if o is None:
+        return []
+    return list(dict.fromkeys([*((m, o.ratio) for m in o.methods), *(("ft", r) for r in o.ratios)]))
 
 
 def no_target_tag(steps: int, seed: int) -> str:
@@ -112,7 +134,7 @@ class _Builder:
         return self.plan.base if policy == BASE_POLICY else f"ckpt:{self.study}-{policy}@latest"
 
     # -- units ---------------------------------------------------------------------------------------------------
-    def collect(self, shift: str, policy: str, episodes: int) -> str:
+    def collect(self, shift: str, policy: str, episodes: int, seed: int | None = None) -> str:
         c = self.plan.collect
         deps = () if policy == BASE_POLICY else (f"train:{policy}",)
         return self._add(
@@ -125,7 +147,7 @@ class _Builder:
                     "policy": policy,
                     "policy_ref": self.ref(policy),
                     "episodes": episodes,
-                    "seed": c.seed,
+                    "seed": c.seed if seed is None else seed,
                     "epsilon": c.epsilon,
                     "batch": c.batch,
                 },
@@ -150,23 +172,34 @@ class _Builder:
         seed: int,
         monitor: Mapping[str, Any] | None = None,
         mixed: bool = True,
+        more: Sequence[tuple[str, int]] = (),
+        share: float = 0.5,
     ) -> str:
-        """A training run on the first K episodes of ``data`` (None: base data alone), 50/50 with base data if
-        ``mixed``."""
+        """A training run on the first K episodes of ``data`` (None: base data alone), mixed with base data if
+        ``mixed``: the target data at ``share`` of each batch; ``more`` target data (online rounds) share it with
+        ``data`` in proportion to their episodes."""
         deps = [*self.base_deps]
-        target = None
+        target, extra = None, []
         if data is not None:
-            collect_unit, tier = data
-            deps.insert(0, collect_unit)
-            target = {
-                "collect": collect_unit,
-                "dataset": self.units[collect_unit].params["dataset"],
-                "tier": tier,
-                "weight": 0.5 if mixed else 1.0,
-            }
-        if init is not None and init != BASE_POLICY:
+            parts = [data, *more]
+            total = sum(tier for _, tier in parts)
+            deps = [*(collect_unit for collect_unit, _ in parts), *deps]
+            targets = [
+                {
+                    "collect": collect_unit,
+                    "dataset": self.units[collect_unit].params["dataset"],
+                    "tier": tier,
+                    "weight": (share if mixed else 1.0) * (tier / total if more else 1.0),
+                }
+                for collect_unit, tier in parts
+            ]
+            target, extra = targets[0], targets[1:]
+        if init == FEATURES_POLICY:
+            deps.append(self.features())
+        elif init is not None and init != BASE_POLICY:
             deps.append(f"train:{init}")
-        mix = base_mix(self.base, 1.0 if target is None else 0.5) if mixed or target is None else []
+        base_share = 1.0 if target is None else 1.0 - share
+        mix = base_mix(self.base, base_share) if (mixed or target is None) and base_share > 0 else []
         return self._add(
             Unit(
                 f"train:{tag}",
@@ -181,6 +214,7 @@ class _Builder:
                     "seed": seed,
                     "base": mix,
                     "target": target,
+                    **({"more_targets": extra} if extra else {}),  # online rounds: every round's data so far
                     "checkpoint_every": self.plan.checkpoint_every,
                     "monitor": None if monitor is None else dict(monitor),
                     # fp32 is left out, so the units of plans made before the setting keep their parameters
@@ -188,6 +222,26 @@ class _Builder:
                     **({} if self.plan.learner == "qtopt" else {"learner": self.plan.learner}),
                 },
                 tuple(deps),
+            )
+        )
+
+    def features(self) -> str:
+        """The supervised features (the plan's [supervised]), in the base's architecture and recipe."""
+        sv = self.plan.supervised
+        assert sv is not None  # plan.py sets it whenever a supervised baseline is asked for
+        return self._add(
+            Unit(
+                f"features:{FEATURES_POLICY}",
+                "features",
+                {
+                    "checkpoint": f"{self.study}-{FEATURES_POLICY}",
+                    "like_ref": self.plan.base,
+                    "classes": sv.classes,
+                    "frames": sv.frames,
+                    "steps": sv.steps,
+                    "seed": sv.seed,
+                    "encoder": sv.encoder,
+                },
             )
         )
 
@@ -211,6 +265,34 @@ class _Builder:
         )
 
     # -- experiments ---------------------------------------------------------------------------------------------
+    def _online(self) -> None:
+        """Online fine-tuning in rounds (Figs. 5.10 and 5.11): round i's policy collects, round i+1 fine-tunes on
+        every round's data so far.  Round 1 trains on the base policy's own collection (the tiers' data)."""
+        o = self.plan.online
+        assert o is not None
+        for method, ratio in online_runs(self.plan):
+            prev, collected = BASE_POLICY, []
+            for i in range(1, o.rounds + 1):
+                if i == 1:
+                    collected.append(self.target_data(o.shift, o.episodes))
+                else:  # the previous round's policy collects on fresh scenes
+                    seed = self.plan.collect.seed + i - 1
+                    collected.append((self.collect(o.shift, prev, o.episodes, seed=seed), o.episodes))
+                tag = online_tag(method, ratio, o.shift, i, o.episodes, o.steps, o.seed)
+                self.train(
+                    tag,
+                    o.shift,
+                    collected[0],
+                    more=collected[1:],
+                    share=ratio,
+                    method=method if i == 1 else "ft",
+                    init=prev,
+                    steps=o.steps,
+                    seed=o.seed,
+                )
+                self.evaluate(tag, o.shift)
+                prev = tag
+
     def build(self) -> dict[str, Unit]:
         p = self.plan
         challenge = ["base", *p.shifts]
@@ -218,6 +300,7 @@ class _Builder:
             *(p.continual.sequence if p.continual else ()),
             *([p.curves.shift] if p.curves else ()),
             *([p.early_stop.shift] if p.early_stop else ()),
+            *([p.online.shift] if p.online else ()),
         ]
         for s in [*challenge, *[s for s in extra if s not in challenge]]:
             self.evaluate(BASE_POLICY, s)  # Table 5.1, tier 0 of Table 5.2, stage 0 of Table 5.3
@@ -242,8 +325,8 @@ class _Builder:
                         tag,
                         shift,
                         self.target_data(shift, top),
-                        method="scratch" if method == "scratch_target" else method,
-                        init=BASE_POLICY,
+                        method="scratch" if method == "scratch_target" else SUPERVISED_BASELINES.get(method, method),
+                        init=FEATURES_POLICY if method in SUPERVISED_BASELINES else BASE_POLICY,
                         steps=f.steps,
                         seed=seed,
                         mixed=method != "scratch_target",
@@ -272,6 +355,8 @@ class _Builder:
                     self.evaluate(tag, shift)
         if p.continual is not None:
             self._continual()
+        if p.online is not None:
+            self._online()
         if p.curves is not None:
             cv = p.curves
             for method in cv.methods:

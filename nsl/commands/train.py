@@ -7,7 +7,14 @@ import argparse
 from nsl.commands._options import add_field, add_parser
 from nsl.services.options import TrainOptions
 
-METHODS = ("scratch", "ft", "new_head", "pnn", "ft_pnn")  # nsl.learners.METHODS (checked by the test of options)
+METHODS = (
+    "scratch",
+    "ft",
+    "new_head",
+    "new_head_frozen",
+    "pnn",
+    "ft_pnn",
+)  # nsl.learners.METHODS (checked by the test of options)
 CRITERIA = ("eval", "softopc", "auc", "td")  # nsl.eval.CRITERIA
 
 

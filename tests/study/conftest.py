@@ -34,9 +34,22 @@ seed = 2000
 tiers = [4, 8]
 steps = 10
 seeds = [0]
-baselines = ["scratch", "scratch_target", "no_target"]
+baselines = ["scratch", "scratch_target", "no_target", "supervised"]
 cross_shift = true
 base_task = true
+
+[supervised]
+classes = 3
+frames = 3
+steps = 4
+
+[online]
+shift = "harsh_lighting"
+rounds = 2
+episodes = 4
+steps = 10
+methods = ["ft", "new_head"]
+ratios = [0.24, 0.99]
 
 [continual]
 sequence = ["harsh_lighting", "offset_gripper"]

@@ -60,7 +60,7 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
         ("offset gripper", "ours"),
         ("", "study"),
     ]
-    assert all(len(r) == 8 for r in tiers)  # + scratch_target and no_target
+    assert all(len(r) == 9 for r in tiers)  # + scratch_target, no_target and supervised
     # the tier cells are the fine-tuned checkpoints' catalogued evaluations
     with Catalog() as cat:
         ft = cat.resolve_checkpoint("ckpt:mini-ft-harsh-lighting-n8-k10-s0@latest")
@@ -120,7 +120,25 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
     assert es[-1][1] != "no choice" and any(ch.isdigit() for ch in es[-1][1]), es
     # findings (a)-(e), each with a verdict, in the report and recomputed from the records
     verdicts = {f.key: f.verdict for f in findings(records)}
-    assert set(verdicts) == set("abcdef")
+    assert set(verdicts) == set("abcdefghi")
+    # online rounds: round 1 of ft at half target data is Table 5.2's tier-4 fine-tune; round 2 collects with it
+    online = records["online"]
+    assert set(online) == {"ft@0.5", "new_head@0.5", "ft@0.24", "ft@0.99"}
+    assert all(x is not None for run in online.values() for x in run["success"]) and online["ft@0.5"]["grasps"] == [
+        0,
+        4,
+        8,
+    ]
+    with Catalog() as cat:
+        r2 = cat.resolve_checkpoint("ckpt:mini-online-ft-p50-harsh-lighting-r2-k10-s0@latest")
+        r1 = cat.resolve_checkpoint("ckpt:mini-ft-harsh-lighting-n4-k10-s0@latest")
+    assert r2.parent == r1.id
+    assert sorted(d.dataset for d in r2.data) == [
+        "mini-base-oracle",
+        "mini-harsh-lighting-by-base",
+        "mini-harsh-lighting-by-ft-harsh-lighting-n4-k10-s0",
+    ]
+    assert (folder / "online.png").is_file() and "## Online fine-tuning (Figs. 5.10, 5.11)" in text
     # the baselines that separate the causes ran as the plan defines them
     with Catalog() as cat:
         alone = cat.resolve_checkpoint("ckpt:mini-scratch_target-harsh-lighting-n8-k10-s0@latest")
@@ -129,6 +147,13 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
     assert load_checkpoint(alone.path).config["method"] == "scratch"  # the base gives only its architecture
     assert [d.dataset for d in none.data] == ["mini-base-oracle"] and none.parent == base_id
     assert tiers[0][7] != "-" and tiers[2][7] != "-"  # no_target on each shift
+    # the supervised features: a classifier's trunk in the base's architecture, fine-tuned with a fresh head
+    with Catalog() as cat:
+        features = cat.resolve_checkpoint("ckpt:mini-features@latest")
+        supervised = cat.resolve_checkpoint("ckpt:mini-supervised-harsh-lighting-n8-k10-s0@latest")
+    assert load_checkpoint(features.path).config["data"]["features"]["classes"] == 3
+    assert supervised.parent == features.id and load_checkpoint(supervised.path).config["method"] == "new_head"
+    assert tiers[0][8] != "-" and tiers[1][8] == "2%"  # ours, and the study's ImageNet column (harsh lighting)
     # every top-tier fine-tune on every shift, against the base policy there
     cross = _table(text, "The top tier's fine-tunes on every shift")
     assert [r[0] for r in cross] == ["base policy", "harsh lighting", "offset gripper"]

@@ -40,8 +40,8 @@ def test_names_are_derived_from_the_plan_and_experiments_share_units():
     stage1 = units["train:ft-harsh-lighting-n8-k10-s0"]
     assert stage1.params["init"] == "base" and stage1.params["target"]["tier"] == 8
     # one base-policy collection per shift (and of the base task: finetune.base_task); tiers, curves and early
-    # stopping are views of it
-    collects = sorted(n for n in units if n.startswith("collect:"))
+    # stopping are views of it (online rounds after the first collect with their own policies)
+    collects = sorted(n for n in units if n.startswith("collect:") and "online" not in n and "n4" not in n)
     assert collects == [
         "collect:base:base",
         "collect:harsh_lighting:base",
@@ -181,3 +181,82 @@ def test_the_estimate_counts_a_bf16_training_unit_at_the_measured_speed_up(monke
     assert unit_seconds(auto[name]) - 1.5 == pytest.approx(work / BF16_STEP_SPEEDUP)
     monkeypatch.setattr(precision, "bf16_supported", lambda: False)  # auto falls back to fp32
     assert unit_seconds(auto[name]) == unit_seconds(fp32[name])
+
+
+def test_supervised_baselines_fine_tune_one_features_unit_trained_or_frozen(tmp_path):
+    text = MINI_PLAN.replace('"no_target", "supervised"]', '"no_target", "supervised", "supervised_frozen"]')
+    plan, units = _units(text)
+    features = units["features:features"]
+    assert features.kind == "features" and features.params["checkpoint"] == "mini-features"
+    assert (features.params["classes"], features.params["frames"], features.params["steps"]) == (3, 3, 4)
+    assert features.params["like_ref"] == plan.base  # the base's architecture and recipe
+    for baseline, method in (("supervised", "new_head"), ("supervised_frozen", "new_head_frozen")):
+        u = units[f"train:{baseline}-offset-gripper-n8-k10-s0"]
+        assert u.params["method"] == method and u.params["init_ref"] == "ckpt:mini-features@latest"
+        assert "features:features" in u.deps and u.params["target"]["weight"] == 0.5
+        assert f"eval:{baseline}-offset-gripper-n8-k10-s0:base" in units
+    order(unit_graph(units))  # the features come before their fine-tunes
+    # without the section, a supervised baseline takes the default features (all 899 objects)
+    bare = parse_plan(tomllib.loads(text.replace("[supervised]\nclasses = 3\nframes = 3\nsteps = 4\n", "")))
+    assert bare.supervised is not None and bare.supervised.classes == 0
+    # and a plan without supervised baselines records no section (its identity is unchanged)
+    plain = parse_plan(
+        tomllib.loads(
+            text.replace(', "supervised", "supervised_frozen"]', "]").replace(
+                "[supervised]\nclasses = 3\nframes = 3\nsteps = 4\n", ""
+            )
+        )
+    )
+    assert "supervised" not in plain.to_dict()
+
+
+def test_online_rounds_chain_collection_and_fine_tuning_over_every_rounds_data():
+    text = MINI_PLAN.replace("rounds = 2\n", "rounds = 3\n")
+    plan, units = _units(text)
+    # round 1 at half target data is Table 5.2's fine-tune on the base policy's first 4 episodes: one unit
+    r1 = units["train:ft-harsh-lighting-n4-k10-s0"]
+    assert r1.params["method"] == "ft" and r1.params["target"]["tier"] == 4 and r1.params["init"] == "base"
+    r2 = units["train:online-ft-p50-harsh-lighting-r2-k10-s0"]
+    r3 = units["train:online-ft-p50-harsh-lighting-r3-k10-s0"]
+    assert r2.params["init"] == "ft-harsh-lighting-n4-k10-s0" and r2.params["method"] == "ft"
+    assert r3.params["init"] == "online-ft-p50-harsh-lighting-r2-k10-s0"
+    # round 3 trains on the three rounds' data, which share half of each batch in proportion to their episodes
+    c2, c3 = (
+        units["collect:harsh_lighting:ft-harsh-lighting-n4-k10-s0"],
+        units["collect:harsh_lighting:online-ft-p50-harsh-lighting-r2-k10-s0"],
+    )
+    assert (c2.params["seed"], c3.params["seed"]) == (plan.collect.seed + 1, plan.collect.seed + 2)
+    assert c3.deps == ("train:online-ft-p50-harsh-lighting-r2-k10-s0",)
+    targets = [r3.params["target"], *r3.params["more_targets"]]
+    assert [t["dataset"] for t in targets] == [
+        "mini-harsh-lighting-by-base",
+        "mini-harsh-lighting-by-ft-harsh-lighting-n4-k10-s0",
+        "mini-harsh-lighting-by-online-ft-p50-harsh-lighting-r2-k10-s0",
+    ]
+    assert [t["tier"] for t in targets] == [4, 4, 4]
+    assert sum(t["weight"] for t in targets) == 0.5 and sum(b["weight"] for b in r3.params["base"]) == 0.5
+    # a new head only in round 1; the ratio runs start with ft at their own share
+    h1, h2 = (
+        units["train:new_head-harsh-lighting-n4-k10-s0"],
+        units["train:online-new_head-p50-harsh-lighting-r2-k10-s0"],
+    )
+    assert (h1.params["method"], h2.params["method"]) == ("new_head", "ft")
+    q1 = units["train:online-ft-p99-harsh-lighting-r1-k10-s0"]
+    assert q1.params["target"]["weight"] == 0.99 and abs(sum(b["weight"] for b in q1.params["base"]) - 0.01) < 1e-12
+    for tag in ("online-ft-p99-harsh-lighting-r3-k10-s0", "online-new_head-p50-harsh-lighting-r3-k10-s0"):
+        assert f"eval:{tag}:harsh_lighting" in units
+    order(unit_graph(units))
+
+
+def test_online_settings_are_checked_before_any_work():
+    import pytest
+
+    from nsl.errors import ConfigError
+
+    for old, new, message in (
+        ("episodes = 4\nsteps = 10\nmethods", "episodes = 9\nsteps = 10\nmethods", "above the collection size"),
+        ('methods = ["ft", "new_head"]', 'methods = ["pnn"]', "start with ft or new_head"),
+        ("ratios = [0.24, 0.99]", "ratios = [1.5]", "target data's share"),
+    ):
+        with pytest.raises(ConfigError, match=message):
+            parse_plan(tomllib.loads(MINI_PLAN.replace(old, new)))

@@ -1,0 +1,86 @@
+"""Labelled camera frames of the training objects: the data of the supervised features (the project's ImageNet).
+
+Each frame shows one object of the train split, in the bin of the base task, from the wrist camera at a
+random height and yaw above it; its label is the object's index in the split (899 classes: the 900 train
+folders but one whose mesh is broken).  The object's pose, size and colour are random, so a classifier must
+tell the objects apart by their shape.  The test split's objects (the ones every evaluation grasps) never
+appear.
+
+``object_frames(per_class, seed)`` renders the same frames for the same arguments: object ``k``'s size draws
+from ``numpy.random.default_rng([seed, k])`` and its frame ``j`` from ``default_rng([seed, k, j])``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+
+from nsl.errors import ConfigError
+from nsl.progress import progress_bar
+
+from . import objects as objlib
+from .env import EnvConfig
+from .render import SceneRenderer
+from .scene import BIN_HALF, FINGER_OPEN, ObjectSpec, build_spec
+from .shifts import parse_shift
+
+CAMERA_HEIGHT = (0.15, 0.30)  # wrist heights the frames are taken from (metres)
+
+
+def object_classes(classes: int | None = None) -> tuple[int, ...]:
+    """The mesh ids of the first ``classes`` train objects (all 899 when None or 0): the classifier's labels."""
+    ids = objlib.object_ids("train")
+    if not classes:
+        return ids
+    if not 2 <= classes <= len(ids):
+        raise ConfigError(f"classes {classes} is out of range; use 2..{len(ids)} (the train split's objects)")
+    return ids[:classes]
+
+
+def object_frames(
+    per_class: int, seed: int, classes: int | None = None, image_size: int = 64, progress: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(images (N, H, W, 3) uint8, labels (N,) int64)``: ``per_class`` frames of each train object, in class order."""
+    if per_class < 1:
+        raise ConfigError(f"frames per class {per_class} must be at least 1")
+    ids = object_classes(classes)
+    size_range = EnvConfig().object_size
+    base = parse_shift("base")
+    renderer = SceneRenderer(image_size, image_size)
+    images = np.empty((len(ids) * per_class, image_size, image_size, 3), np.uint8)
+    labels = np.repeat(np.arange(len(ids), dtype=np.int64), per_class)
+    spread = BIN_HALF - 0.045
+    try:
+        for k, mesh_id in enumerate(progress_bar(ids, desc="render objects", unit="object", disable=not progress)):
+            rng = np.random.default_rng([seed, k])
+            mesh = objlib.load_mesh(mesh_id)
+            scale = objlib.scale_for(mesh, rng.uniform(*size_range))
+            size = (float(scale[0]), float(scale[1]), float(scale[2]))
+            obj = ObjectSpec(mesh_id, size, (1.0, 1.0, 1.0, 1.0), (0.0, 0.0, 0.05), (1.0, 0.0, 0.0, 0.0))
+            model = build_spec([obj], base, image_size).compile()
+            data = mujoco.MjData(model)
+            radius = 0.5 * float(np.linalg.norm(mesh.extents * scale))
+            joint = int(model.joint("object0_joint").qposadr[0])
+            geom = model.geom("object0").id
+            wrist = {j: int(model.joint(j).qposadr[0]) for j in ("wrist_x", "wrist_y", "wrist_z", "wrist_yaw")}
+            for j in range(per_class):
+                r = np.random.default_rng([seed, k, j])
+                x, y = r.uniform(-spread, spread, 2)
+                q = r.normal(size=4)
+                data.qpos[joint : joint + 7] = [x, y, radius, *(q / np.linalg.norm(q))]
+                model.geom_rgba[geom] = [*r.uniform(0.15, 1.0, 3), 1.0]
+                dx, dy = r.uniform(-0.03, 0.03, 2)
+                data.qpos[wrist["wrist_x"]] = x + dx
+                data.qpos[wrist["wrist_y"]] = y + dy
+                data.qpos[wrist["wrist_z"]] = r.uniform(*CAMERA_HEIGHT)
+                data.qpos[wrist["wrist_yaw"]] = r.uniform(-math.pi / 2, math.pi / 2)
+                for finger in ("finger_left", "finger_right"):
+                    data.qpos[int(model.joint(finger).qposadr[0])] = FINGER_OPEN
+                mujoco.mj_forward(model, data)
+                images[k * per_class + j] = renderer.render(model, data, "wrist")
+            renderer.release(model)
+    finally:
+        renderer.close()
+    return images, labels

@@ -1,0 +1,31 @@
+"""Labelled frames of the train objects (the supervised features' data): reproducible, train objects only."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nsl.collectors import object_classes, object_frames
+from nsl.collectors.objects import object_ids
+from nsl.errors import ConfigError
+
+
+def test_frames_are_labelled_by_train_object_and_reproducible():
+    images, labels = object_frames(per_class=3, seed=7, classes=4)
+    assert images.shape == (12, 64, 64, 3) and images.dtype == np.uint8
+    assert labels.tolist() == [0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3]
+    again, _ = object_frames(per_class=3, seed=7, classes=4)
+    other, _ = object_frames(per_class=3, seed=8, classes=4)
+    assert np.array_equal(images, again) and not np.array_equal(images, other)
+    # every frame differs (pose, colour, viewpoint) and shows something besides the empty bin
+    assert len({f.tobytes() for f in images}) == 12
+    assert all(f.std() > 10 for f in images)
+
+
+def test_the_classes_are_the_899_train_objects_and_never_a_test_object():
+    classes = object_classes()
+    assert len(classes) == 899 and set(classes) == set(object_ids("train"))
+    assert not set(classes) & set(object_ids("test"))
+    assert object_classes(5) == classes[:5]
+    with pytest.raises(ConfigError, match="classes 1 is out of range"):
+        object_classes(1)
