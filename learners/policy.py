@@ -155,7 +155,7 @@ def load_policy(
 
     ``precision`` is the precision it acts in (``fp32``, ``bf16`` or ``auto``), whatever it was trained in.
     """
-    from .registry import acting_policy, find_learner
+    from .registry import find_learner
 
     ckpt = load_checkpoint(Path(checkpoint_dir))
     training = TrainConfig.from_dict(ckpt.config["training"])
@@ -176,3 +176,10 @@ def load_policy(
         "precision": precision,
     }
     return acting_policy(algo, ckpt.net, cem, **kwargs)
+
+
+def acting_policy(algo: Any, net: QNetwork, cem: CemConfig, **kwargs: Any) -> CEMPolicy:
+    """How a network trained by ``algo`` (an :class:`~nsl.learners.Algorithm`) acts: the learner's own policy,
+    else CEM over its Q-function (what the built-in learners do).  ``kwargs`` go to the policy (name, info,
+    epsilon, precision, ...)."""
+    return algo.policy(net, cem, **kwargs) or CEMPolicy(net, cem, **kwargs)

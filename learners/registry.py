@@ -81,11 +81,3 @@ def _number(value: str) -> Any:
         except ValueError:
             pass
     return value
-
-
-def acting_policy(algo: Algorithm, net: Any, cem: Any, **kwargs: Any) -> Any:
-    """How a network trained by ``algo`` acts: the learner's own policy, else CEM over its Q-function (what the
-    built-in learners do).  ``kwargs`` go to the policy (name, info, epsilon, precision, ...)."""
-    from .policy import CEMPolicy
-
-    return algo.policy(net, cem, **kwargs) or CEMPolicy(net, cem, **kwargs)

@@ -62,10 +62,10 @@ from .checkpoint import (
 )
 from .config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_LR_FACTOR, METHODS, NetConfig, TrainConfig
 from .networks import QNetwork, freeze_trunk, grow_column, reinit_head, shrink_perturb
-from .policy import CEMPolicy
+from .policy import CEMPolicy, acting_policy
 from .precision import resolve_precision
 from .qtopt import batch_to_torch
-from .registry import acting_policy, find_learner
+from .registry import find_learner
 from .sampler import Sampler
 
 DEFAULT_LR = 3e-4

@@ -37,8 +37,9 @@ STEPS_PER_S = {"ft": 11.0, "new_head": 11.0, "new_head_frozen": 11.0, "scratch":
 # for 2,000 steps on one thread each (25-27 steps/s, two units at a time, AVX-512 BF16, no AMX), where its float32
 # units had logged 12-13 steps/s; `nsl bench learner` gives 1.6-1.7x in alternating rounds.  Rounded down.
 BF16_STEP_SPEEDUP = 1.8
-# Supervised features (nsl features): one scene compiled per train object, then its frames rendered; classifier
-# steps of 128 frames through the base's trunk.  Measured with `nsl features` (see docs/study.md).
+# Supervised features (nsl features): one scene compiled per train object, then its frames rendered (80 frames of 20
+# objects took 0.63 s here, while a test suite ran); classifier steps of 128 frames through the base's trunk, about
+# as costly as a fine-tuning step (not yet timed on a quiet machine: a first estimate).
 TRAIN_OBJECTS = 899
 OBJECT_SCENE_S = 0.02
 OBJECT_FRAME_S = 0.002
