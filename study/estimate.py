@@ -38,12 +38,13 @@ STEPS_PER_S = {"ft": 11.0, "new_head": 11.0, "new_head_frozen": 11.0, "scratch":
 # units had logged 12-13 steps/s; `nsl bench learner` gives 1.6-1.7x in alternating rounds.  Rounded down.
 BF16_STEP_SPEEDUP = 1.8
 # Supervised features (nsl features): one scene compiled per train object, then its frames rendered (80 frames of 20
-# objects took 0.63 s here, while a test suite ran); classifier steps of 128 frames through the base's trunk, about
-# as costly as a fine-tuning step (not yet timed on a quiet machine: a first estimate).
+# objects took 0.63 s here, while a test suite ran); classifier steps of 128 frames through the base's trunk, in
+# float32 with the batch-norm classifier: the `online` plan's features unit (3,000 steps, 899 x 24 frames) took
+# about 1,130 s beside another unit, so about 3 steps/s.
 TRAIN_OBJECTS = 899
 OBJECT_SCENE_S = 0.02
 OBJECT_FRAME_S = 0.002
-FEATURE_STEPS_PER_S = 10.0
+FEATURE_STEPS_PER_S = 3.0
 IMAGE_CACHE_FRAMES_PER_S = 8_000.0  # first use of a dataset version: decode its PNG frames once
 FRAMES_PER_EPISODE = 8
 

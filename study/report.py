@@ -34,7 +34,7 @@ from nsl.eval import (
 
 from . import reference as ref
 from .plan import Plan
-from .units import BASE_POLICY, continual_tags, no_target_tag, online_runs, online_tag, train_tag
+from .units import BASE_POLICY, FEATURES_POLICY, continual_tags, no_target_tag, online_runs, online_tag, train_tag
 
 REPORT_FILE = "report.md"
 RECORDS_FILE = "records.json"
@@ -238,6 +238,8 @@ def gather(plan: Plan, study: str, evaluation, read_curve_file, checkpoint=None)
         }
         if checkpoint is not None:
             out["weight_change"] = weight_changes(plan, study, checkpoint)
+    if plan.supervised is not None and checkpoint is not None:
+        out["features"] = features_accuracy(checkpoint(f"ckpt:{study}-{FEATURES_POLICY}@latest"))
     if plan.continual is not None:
         c = plan.continual
         tasks = ["base", *c.sequence]
@@ -376,6 +378,30 @@ def study_base_row_note() -> str:
         + ", ".join(figures)
         + ") is a fine-tune on base-task data, not its shift fine-tunes evaluated on the base task, "
         "so it is not comparable to this table."
+    )
+
+
+def features_accuracy(folder: Path | None) -> dict[str, Any] | None:
+    """What the supervised features' training measured (held-out and training accuracy, chance, classes, final
+    loss), from its checkpoint at ``folder``; None until it exists or for imported weights (``--encoder``)."""
+    if folder is None or not (Path(folder) / "config.json").is_file():
+        return None
+    import json
+
+    got = json.loads((Path(folder) / "config.json").read_text()).get("data", {}).get("features")
+    keys = ("classes", "heldout_accuracy", "train_accuracy", "chance", "final_loss")
+    return {k: got[k] for k in keys} if got and all(k in got for k in keys) else None
+
+
+def features_note(records: Mapping[str, Any]) -> str:
+    """How well the supervised trunk learned its classification task, in one sentence ('' until measured)."""
+    f = records.get("features")
+    if not f or f["heldout_accuracy"] is None:
+        return ""
+    return (
+        f"The supervised trunk classifies {100 * f['heldout_accuracy']:.1f}% of held-out frames of the "
+        f"{f['classes']} train objects (chance {100 * f['chance']:.2f}%; {100 * f['train_accuracy']:.1f}% of its "
+        f"training frames, final loss {f['final_loss']:.2f})."
     )
 
 
@@ -888,11 +914,12 @@ def supervised_finding(records: Mapping[str, Any], baselines: Sequence[str], top
         for s in records["finetune"]
         if ref.study_shift(s) in ref.FINETUNE
     )
+    note = features_note(records)
     return Finding(
         "g",
         f"RL pre-training beats supervised features at {top} episodes on every shift (features trained and frozen)",
         holds,
-        "; ".join(parts) or "-",
+        ("; ".join(parts) or "-") + (f". {note}" if note else ""),
         f"{study}; frozen {ref.SUPERVISED_FROZEN}% ({ref.SUPERVISED_CONCLUSION})",
     )
 
@@ -1224,7 +1251,7 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
         "scratch_target one on the target data alone, no_target the base fine-tuned on base data alone; "
         "supervised and supervised_frozen are a fresh head on supervised features (the trunk trained to classify "
         "the train objects from rendered frames, the project's analogue of the study's ImageNet column), the trunk "
-        "trained and frozen. Success on the shift:",
+        f"trained and frozen.{' ' + features_note(records) if features_note(records) else ''} Success on the shift:",
         "",
         tiers_table(records),
         "",
