@@ -64,6 +64,10 @@ SUPERVISED_CONCLUSION = "pre-training via RL is essential"
 # exploration grasps; with a new head it barely reaches 30%.  Fig. 5.11: 1, 24, 44, 71 and 99% target data per
 # batch, up to 10,000 grasps: more target data adapts faster.
 ONLINE = "with all parameters the base's level after about 5,000 grasps (both start near 15%); a new head barely 30%"
+WEIGHT_CHANGE = (
+    "the visual shifts change the convolutional layers substantially, and so does the purely morphological offset "
+    "gripper (layers conv2-conv7), for hand-eye coordination (Fig. 5.8, bars normalised by the base-task fine-tune)"
+)
 ONLINE_RATIOS = (0.01, 0.24, 0.44, 0.71, 0.99)
 ONLINE_RATIO = "1-99% target data per batch, up to 10,000 grasps: more target data adapts faster"
 

@@ -889,7 +889,34 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
         out.append(supervised_finding(records, supervised, top))
     if records.get("online"):
         out += online_findings(records)
+    # (j) Fig. 5.8: even the morphological shifts change the convolutional layers
+    if records["plan"]["finetune"].get("base_task"):
+        out.append(weight_change_finding(records))
     return out
+
+
+def _is_conv(layer: str) -> bool:
+    return ".convs." in f".{layer}"
+
+
+def weight_change_finding(records: Mapping[str, Any]) -> Finding:
+    """(j): each shift's convolutional layers move further from the base than in a fine-tune on the base task
+    (the mean over conv layers of Fig. 5.8's normalised distance above 1); point estimates of the seed mean."""
+    wc = records.get("weight_change")
+    holds, ours = None, "-"
+    if wc:
+        means = {s: [v for k, v in d.items() if _is_conv(k)] for s, d in wc.items()}
+        means = {s: sum(v) / len(v) for s, v in means.items() if v}
+        if means:
+            holds = all(m > 1 for m in means.values())
+            ours = "conv layers' mean distance against the base-task fine-tune's: " + ", ".join(
+                f"{_pretty(s)} {m:.2f}x" for s, m in means.items()
+            )
+            ours += " (point estimates, no interval)"
+    return Finding(
+        "j", "every shift changes the convolutional layers more than a fine-tune on the base task", holds, ours,
+        ref.WEIGHT_CHANGE,
+    )  # fmt: skip
 
 
 def supervised_finding(records: Mapping[str, Any], baselines: Sequence[str], top: str) -> Finding:

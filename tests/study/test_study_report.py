@@ -382,6 +382,13 @@ def test_finding_g_compares_rl_pre_training_with_supervised_features_trained_and
     assert g.study.startswith("harsh lighting 63% against 2%, offset gripper 98% against 47%; frozen 0%")
     rows["offset_gripper"]["baselines"]["supervised"] = [c(40)]
     assert {f.key: f for f in findings(rec)}["g"].holds is True
+    # the features' own accuracy joins our side of the finding once recorded
+    rec["features"] = {"classes": 899, "heldout_accuracy": 0.002, "train_accuracy": 0.034, "chance": 1 / 899,
+                       "final_loss": 6.22}  # fmt: skip
+    assert {f.key: f for f in findings(rec)}["g"].ours.endswith(
+        "The supervised trunk classifies 0.2% of held-out frames of the 899 train objects (chance 0.11%; 3.4% of "
+        "its training frames, final loss 6.22)."
+    )
     del rows["offset_gripper"]["baselines"]["supervised_frozen"]
     assert {f.key: f for f in findings(rec)}["g"].holds is None  # not measured everywhere yet
     table = tiers_table(rec).splitlines()
@@ -419,3 +426,16 @@ def test_online_table_findings_and_plot_from_hand_made_rounds(tmp_path):
     assert table[0] == "| round 1's method | target share | 0 grasps | 4 grasps | 8 grasps |"
     assert table[2].startswith("| ft | 50% | 20% [") and len(table) == 6
     assert plot_online(rec, tmp_path / "online.png").stat().st_size > 1000
+
+
+def test_finding_j_asks_whether_every_shift_moves_the_conv_layers_more_than_the_base_task():
+    wc = {
+        "harsh_lighting": {"columns.0.convs.0": 2.0, "columns.0.convs.1": 1.5, "columns.0.out": 0.5},
+        "offset_gripper": {"columns.0.convs.0": 1.4, "columns.0.convs.1": 0.8, "columns.0.out": 3.0},
+    }
+    j = {f.key: f for f in findings(records(weight_change=wc))}["j"]
+    assert j.holds is True  # conv means 1.75 and 1.10: both above the base-task fine-tune's 1
+    assert "harsh lighting 1.75x, offset gripper 1.10x" in j.ours and "offset gripper" in j.study
+    wc["offset_gripper"]["columns.0.convs.0"] = 1.0  # conv mean 0.90: the head moved, the convs less than 1
+    assert {f.key: f for f in findings(records(weight_change=wc))}["j"].holds is False
+    assert {f.key: f for f in findings(records())}["j"].holds is None  # no weight changes recorded yet

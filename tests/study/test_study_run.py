@@ -120,7 +120,7 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
     assert es[-1][1] != "no choice" and any(ch.isdigit() for ch in es[-1][1]), es
     # findings (a)-(e), each with a verdict, in the report and recomputed from the records
     verdicts = {f.key: f.verdict for f in findings(records)}
-    assert set(verdicts) == set("abcdefghi")
+    assert set(verdicts) == set("abcdefghij")
     # online rounds: round 1 of ft at half target data is Table 5.2's tier-4 fine-tune; round 2 collects with it
     online = records["online"]
     assert set(online) == {"ft@0.5", "new_head@0.5", "ft@0.24", "ft@0.99"}
@@ -154,6 +154,10 @@ def test_mini_study_writes_every_table_from_catalogued_outputs(mini_run, capsys)
     assert load_checkpoint(features.path).config["data"]["features"]["classes"] == 3
     assert supervised.parent == features.id and load_checkpoint(supervised.path).config["method"] == "new_head"
     assert tiers[0][8] != "-" and tiers[1][8] == "2%"  # ours, and the study's ImageNet column (harsh lighting)
+    # how well the features learned their classification, from the features checkpoint, in the table's text
+    got = records["features"]
+    assert got["classes"] == 3 and got["chance"] == pytest.approx(1 / 3) and 0 <= got["heldout_accuracy"] <= 1
+    assert f"{100 * got['heldout_accuracy']:.1f}% of held-out frames of the 3 train objects (chance 33.33%" in text
     # every top-tier fine-tune on every shift, against the base policy there
     cross = _table(text, "The top tier's fine-tunes on every shift")
     assert [r[0] for r in cross] == ["base policy", "harsh lighting", "offset gripper"]
