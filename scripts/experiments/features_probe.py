@@ -4,7 +4,7 @@ classifier with batch norm (``nsl.learners.features.classifier``) against a bare
 Renders ``--frames`` frames of each of ``--classes`` train objects (``nsl.collectors.object_frames``, seed 0), then
 trains the shipped base's architecture (fresh weights) to classify them, as ``nsl features`` does (Adam 1e-3,
 batch 128, random-shift augmentation), and prints the mean cross-entropy of every 100 steps; chance is
-ln(classes) (6.80 for all 899).  ``--plain`` uses the bare linear layer instead.  About 4 minutes each for the
+ln(classes) (6.80 for all 899).  ``--plain`` uses the bare linear layer instead.  About 2 minutes each for the
 defaults on this 2-core machine:
 
     MUJOCO_GL=egl .venv/bin/python scripts/experiments/features_probe.py --classes 899 --frames 8 --steps 500
@@ -22,9 +22,10 @@ from torch import nn
 
 import nsl
 from nsl.collectors import object_frames
-from nsl.learners import NetConfig, QNetwork, is_head_parameter, load_checkpoint
+from nsl.learners import NetConfig, QNetwork, load_checkpoint
 from nsl.learners.augment import prepare_images
 from nsl.learners.features import _features, classifier
+from nsl.learners.networks import is_head_parameter
 
 
 def main() -> None:
