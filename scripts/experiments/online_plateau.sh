@@ -7,8 +7,8 @@
 # reporting scenes, once the number of rounds is chosen on the selection scenes) the last round is also scored on
 # the base task on the same scenes. Prints one line per (shift, seed): the success after every round.
 # Needs the base-data datasets grasp-base-oracle, grasp-base-noisy, grasp-base-random in $NSL_HOME (the `online`
-# or `full` study plan collects them; scripts/collect_base_data.sh too). About 6 minutes per (shift, seed) and round
-# count of 2 on this 2-core machine with bf16 training.
+# or `full` study plan collects them; scripts/collect_base_data.sh too). Not yet run: by the study estimate about 6
+# minutes per (shift, seed) for 2 rounds on this 2-core machine with bf16 training.
 #
 #   NSL_HOME=... SHIFTS="transparent_objects@0.8 offset_gripper@0.25" ROUNDS=2 SEEDS="0" \
 #     bash scripts/experiments/online_plateau.sh
