@@ -384,11 +384,11 @@ def study_base_row_note() -> str:
 def features_accuracy(folder: Path | None) -> dict[str, Any] | None:
     """What the supervised features' training measured (held-out and training accuracy, chance, classes, final
     loss), from its checkpoint at ``folder``; None until it exists or for imported weights (``--encoder``)."""
-    if folder is None or not (Path(folder) / "config.json").is_file():
-        return None
-    import json
+    from nsl.learners import read_config
 
-    got = json.loads((Path(folder) / "config.json").read_text()).get("data", {}).get("features")
+    if folder is None:
+        return None
+    got = read_config(Path(folder)).get("data", {}).get("features")
     keys = ("classes", "heldout_accuracy", "train_accuracy", "chance", "final_loss")
     return {k: got[k] for k in keys} if got and all(k in got for k in keys) else None
 
@@ -1278,7 +1278,7 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
         "scratch_target one on the target data alone, no_target the base fine-tuned on base data alone; "
         "supervised and supervised_frozen are a fresh head on supervised features (the trunk trained to classify "
         "the train objects from rendered frames, the project's analogue of the study's ImageNet column), the trunk "
-        f"trained and frozen.{' ' + features_note(records) if features_note(records) else ''} Success on the shift:",
+        " ".join(["trained and frozen.", *filter(None, [features_note(records)]), "Success on the shift:"]),
         "",
         tiers_table(records),
         "",
