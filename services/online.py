@@ -117,6 +117,7 @@ def online(config: OnlineConfig, name: str = "online", *, progress: bool = True)
                     seed=config.seed,
                     learner=config.learner,
                     target_shift=config.shift,
+                    precision=config.precision,
                 ),
                 progress=progress,
             )

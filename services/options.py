@@ -286,6 +286,12 @@ class OnlineConfig:
     eval_scenes: int = option(EvalConfig.seed, "scene seed of the evaluations (nsl eval --seed)")
     workers: int = option(1, "simulator processes for collection and evaluation")
     seed: int = option(0, "round i collects with scene seed SEED + i; every round trains with SEED")
+    precision: str = option(
+        TrainConfig.precision,
+        "every round's training passes: fp32, bf16 (CPU bfloat16 autocast) or auto (bf16 where the CPU has it); "
+        "collection and evaluation act in fp32",
+        choices=PRECISIONS,
+    )
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         add_field(p, c, name)
     add_field(p, c, "method", choices=("ft", "new_head"))
     add_field(p, c, "learner")
+    add_field(p, c, "precision")
     p.set_defaults(func=run, config=OnlineConfig)
 
 

@@ -14,11 +14,13 @@ from pathlib import Path
 import pytest
 
 from nsl.errors import ConfigError
+from nsl.learners.precision import resolve_precision
 from nsl.services.online import round_mix
 
 ROOT = Path(__file__).resolve().parents[2]
 ARGS = ["online", "--shift", "harsh_lighting@2", "--rounds", "2", "--episodes", "6", "--steps", "6",
-        "--eval-episodes", "4", "--base-data", "grasp-base", "--ratio", "0.5", "--name", "on"]  # fmt: skip
+        "--eval-episodes", "4", "--base-data", "grasp-base", "--ratio", "0.5", "--precision", "auto",
+        "--name", "on"]  # fmt: skip
 
 
 def _nsl(home: Path, *argv: str, wait: bool = True):
@@ -50,6 +52,7 @@ def test_online_rounds_resume_after_sigkill_mid_round_with_identical_numbers(tmp
     sources = {s["ref"].split("@")[0]: s["weight"] for s in config["data"]["sources"]}
     assert sources == {"grasp-base": 0.5, "on-r1": 0.25, "on-r2": 0.25}
     assert config["parent"]["id"] == rows[1]["checkpoint"].removeprefix("ckpt:")
+    assert config["training"]["precision"] == resolve_precision("auto")  # every round trains at --precision
 
     killed = _home(tmp_path, "killed")
     proc = _nsl(killed, *ARGS, wait=False)
