@@ -9,7 +9,8 @@
   under ``checkpoints/`` that are not registered, and stale temporary files
   and folders (``.tmp-*``, ``.*.tmp``) left by interrupted writes.  Anything
   touched within ``min_age`` seconds is left alone, because a running process
-  may be writing it.  Dataset versions are never collected: their folders
+  may be writing it, and so is everything in a folder whose writer lock
+  (:mod:`nsl.locks`) a process holds.  Dataset versions are never collected: their folders
   are the datasets' own record (and ``NAME/.staging`` is a resumable
   collection).  :func:`gc_apply` deletes a plan.
 - :func:`verify` re-hashes registered files and reports each one that is
@@ -18,6 +19,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import time
@@ -28,6 +30,7 @@ from typing import TYPE_CHECKING
 
 from nsl import workspace
 from nsl.errors import ConfigError, NslError
+from nsl.locks import dataset_lock, holder, is_lock_name
 
 from .folders import WEIGHTS_FILE, file_sha256, hash_tree, is_temp_name
 from .records import DATA_PREFIX, CheckpointEntry, DatasetEntry, parse_data_ref, short_hash
@@ -115,13 +118,15 @@ def _remove_dataset(cat: Catalog, entry: DatasetEntry, force: bool, delete_files
             f"data:{entry.ref} was used to train {len(users)} checkpoint(s) ({shown}); remove "
             "those first, or pass --force (their lineage then shows the dataset as removed)"
         )
-    with cat.write() as c:
-        c.execute("DELETE FROM datasets WHERE name = ? AND version = ?", (entry.name, entry.version))
-    removed = [f"dataset {entry.ref}"]
     path = Path(entry.path)
-    if delete_files and path.exists() and _inside(path, workspace.datasets_dir()):
-        _delete(path)
-        removed.append(f"folder {path}")
+    ours = delete_files and path.exists() and _inside(path, workspace.datasets_dir())
+    with dataset_lock(entry.name) if ours else contextlib.nullcontext():  # not while a collection appends to it
+        with cat.write() as c:
+            c.execute("DELETE FROM datasets WHERE name = ? AND version = ?", (entry.name, entry.version))
+        removed = [f"dataset {entry.ref}"]
+        if ours:
+            _delete(path)
+            removed.append(f"folder {path}")
     return removed
 
 
@@ -175,12 +180,12 @@ def gc_plan(cat: Catalog, min_age: float = GC_MIN_AGE_S) -> list[GcItem]:
             dirnames[:] = keep
     skip = {workspace.cache_dir().resolve()}
     for dirpath, dirnames, filenames in os.walk(home):
-        if Path(dirpath).resolve() in skip:
+        if Path(dirpath).resolve() in skip or holder(Path(dirpath)) is not None:  # a writer is at work there
             dirnames[:] = []
             continue
         for n in sorted(dirnames + filenames):
             p = Path(dirpath, n)
-            if is_temp_name(n) and p not in found:
+            if is_temp_name(n) and not is_lock_name(n) and p not in found:
                 found[p] = "stale temporary " + ("folder" if p.is_dir() else "file")
         dirnames[:] = [d for d in dirnames if not is_temp_name(d) and Path(dirpath, d) not in found]
     return [GcItem(p, reason, _size(p)) for p, reason in sorted(found.items()) if _newest_mtime(p) <= cutoff]

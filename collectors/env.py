@@ -7,6 +7,10 @@ with its yaw), or the fixed over-the-shoulder view of the bin.  The state is
 the robot's proprioception: gripper opening in [0, 1], wrist height in
 [0, 1], wrist x and y in [-1, 1] (a fraction of the reach), and the sine and
 cosine of the wrist yaw, as a real arm reports them from its encoders.
+``GraspEnv(obs_type="pixels_agent_pos")`` names them as LeRobot's environments
+do (gym-pusht, gym-aloha): ``{"pixels": ..., "agent_pos": ...}``, which
+``lerobot.envs.utils.preprocess_observation`` turns into ``observation.image``
+and ``observation.state``.
 
 Action (QT-Opt style, each in [-1, 1]): ``(dx, dy, dz, dyaw, close, terminate)``.
 
@@ -64,6 +68,8 @@ from .shifts import ShiftSpec, parse_shift  # noqa: E402
 
 ENV_VERSION = "nsl-grasp-v3"  # v2: 6-d gripper state, camera framed on the bin; v3: wrist camera, 7 cm jaw
 CONTROL_MODES = ("auto_descent", "full")
+# Observation key names: nsl's own (the default) or LeRobot's, as gym-pusht / gym-aloha name them.
+OBS_TYPES: dict[str, tuple[str, str]] = {"image_state": ("image", "state"), "pixels_agent_pos": ("pixels", "agent_pos")}
 
 
 @dataclass(frozen=True)
@@ -162,6 +168,7 @@ class GraspEnv(gym.Env):
         config: EnvConfig | None = None,
         renderer: SceneRenderer | None = None,
         render_mode: str | None = None,
+        obs_type: str = "image_state",
         **overrides: Any,
     ):
         if config is not None and overrides:
@@ -170,14 +177,18 @@ class GraspEnv(gym.Env):
             raise ConfigError(
                 f"render_mode {render_mode!r} is not supported; use one of {self.metadata['render_modes']} (or None)"
             )
+        if obs_type not in OBS_TYPES:
+            raise ConfigError(f"obs_type {obs_type!r} is unknown; use one of {tuple(OBS_TYPES)}")
         self.render_mode = render_mode  # render() returns the camera frame in either case
+        self.obs_type = obs_type
+        self._image_key, self._state_key = OBS_TYPES[obs_type]
         self.config = config = EnvConfig(**overrides) if config is None else config
         self.shift = config.shift_spec
         n = config.image_size
         self.observation_space = gym.spaces.Dict(
             {
-                "image": gym.spaces.Box(0, 255, (n, n, 3), np.uint8),
-                "state": gym.spaces.Box(-1.0, 1.0, (STATE_DIM,), np.float32),
+                self._image_key: gym.spaces.Box(0, 255, (n, n, 3), np.uint8),
+                self._state_key: gym.spaces.Box(-1.0, 1.0, (STATE_DIM,), np.float32),
             }
         )
         self.action_space = gym.spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
@@ -366,7 +377,7 @@ class GraspEnv(gym.Env):
         return bool((heights > self.config.lift_threshold).any())
 
     def _observe(self) -> dict[str, np.ndarray]:
-        return {"image": self.render(), "state": self.gripper_state()}
+        return {self._image_key: self.render(), self._state_key: self.gripper_state()}
 
     def gripper_state(self) -> np.ndarray:
         d, h = self.data, self._h

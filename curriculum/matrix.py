@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from nsl.errors import ConfigError, CorruptDataError
+from nsl.stats import t_interval as stats_t_interval
 from nsl.workspace import atomic_write_bytes
 
 MATRIX_FORMAT = "nsl.transfer-matrix"
@@ -221,16 +222,9 @@ def advantage(ft_auc: Mapping[int, float], scratch_auc: Mapping[int, float], flo
 
 
 def t_interval(values: Sequence[float]) -> tuple[float, float] | None:
-    """The 95% Student-t interval of the mean of ``values`` (None for fewer than two)."""
-    if len(values) < 2:
-        return None
-    from scipy import stats
-
-    n = len(values)
-    mean = sum(values) / n
-    sd = math.sqrt(sum((v - mean) ** 2 for v in values) / (n - 1))
-    half = float(stats.t.ppf(0.975, n - 1)) * sd / math.sqrt(n)
-    return (mean - half, mean + half)
+    """The 95% Student-t interval of the mean of ``values`` (None for fewer than two), from ``nsl.stats``."""
+    got = stats_t_interval(values)
+    return None if got is None else (got[0] - got[1], got[0] + got[1])
 
 
 def _t_interval(values: Sequence[float]) -> tuple[float, float] | None:

@@ -68,22 +68,19 @@ def plot_curriculum(curriculum: Curriculum, path: str | Path) -> Path:
     """Write the optimal (left) and pessimal (right) trees side by side as a PNG; returns the path."""
     import io
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     n = len(curriculum.tasks)
-    fig, axes = plt.subplots(1, 2, figsize=(max(6.0, 1.6 * n + 2), 1.2 * n + 1.5))
-    try:
-        _draw(axes[0], curriculum.optimal, curriculum.tasks, "optimal")
-        _draw(axes[1], curriculum.pessimal, curriculum.tasks, "pessimal")
-        fig.suptitle("Curriculum: learn each task from its parent (C = -A)", fontsize=10)
-        fig.tight_layout()
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=DPI)
-    finally:
-        plt.close(fig)
+    fig = Figure(figsize=(max(6.0, 1.6 * n + 2), 1.2 * n + 1.5))  # its own Agg canvas: pyplot's backend untouched
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, 2)
+    _draw(axes[0], curriculum.optimal, curriculum.tasks, "optimal")
+    _draw(axes[1], curriculum.pessimal, curriculum.tasks, "pessimal")
+    fig.suptitle("Curriculum: learn each task from its parent (C = -A)", fontsize=10)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(path, buf.getvalue())

@@ -12,6 +12,13 @@ has the same hash as an uninterrupted one.
 (hard links to the parent version's files, the staged files, fresh metadata),
 hashes it and renames it to ``NAME/vN``.  A killed run leaves a staging area or
 a temporary directory, never a partial ``vN``.
+
+One process writes a dataset at a time: :meth:`Collection.begin` takes the
+dataset's writer lock (:func:`nsl.locks.dataset_lock`, an OS lock that dies
+with its holder) and the collection holds it until :meth:`Collection.close`
+(or the end of its ``with`` block).  Everything in ``.staging`` and every
+``.tmp-v*`` is therefore the holder's own, and :meth:`begin` clears what a
+killed holder left only under the lock.
 """
 
 from __future__ import annotations
@@ -22,10 +29,12 @@ import os
 import shutil
 import tempfile
 from collections.abc import Iterable
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
 from nsl.errors import ConfigError
+from nsl.locks import dataset_lock
 from nsl.workspace import atomic_write_json
 
 from . import layout, versions, writer
@@ -49,12 +58,41 @@ def _content_spec(spec: dict[str, Any]) -> str:
 class Collection:
     """Episodes ``[start, stop)`` of ``name`` on their way to a new version."""
 
-    def __init__(self, name: str, plan: dict[str, Any], parent: DatasetVersion | None):
+    def __init__(self, name: str, plan: dict[str, Any], parent: DatasetVersion | None, lock: ExitStack | None = None):
         self.name, self.plan, self.parent = name, plan, parent
         self.staging = versions.dataset_root(name) / layout.STAGING_DIR
+        self._lock = lock  # holds the dataset's writer lock (from begin); None: a read-only look at a staging area
         self._buffer: list[Any] = []
         self._cursor: int | None = None  # episode index of the first buffered episode
         self._next_frame = 0  # global frame index of the first buffered episode
+
+    # -- the writer lock --------------------------------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Release the dataset's writer lock (idempotent); the staged files stay for a resume."""
+        lock, self._lock = self._lock, None
+        if lock is not None:
+            lock.close()
+
+    def __enter__(self) -> Collection:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __del__(self) -> None:  # a collection dropped without close() (an interrupted caller) lets go of the lock
+        if getattr(self, "_lock", None) is not None:
+            try:
+                self.close()
+            except Exception:  # interpreter shutdown: the OS releases the lock with the process
+                pass
+
+    def _check_writer(self) -> None:
+        if self._lock is None:
+            raise ConfigError(
+                f"dataset {self.name}: this collection does not hold the dataset's writer lock; "
+                "start it with Collection.begin"
+            )
 
     # -- planning ---------------------------------------------------------------------------------------------------
 
@@ -67,17 +105,43 @@ class Collection:
         image_size: int,
         episodes_per_file: int = layout.DEFAULT_EPISODES_PER_FILE,
         restart: bool = False,
+        *,
+        wait: bool = False,
     ) -> Collection:
         """Plan (or resume) growing ``name`` to ``episodes`` episodes collected under ``spec``.
 
         ``spec`` is the provenance that defines the content (environment, policy,
         seed); it must match the latest version's to append, and the staged
-        plan's to resume.
+        plan's to resume.  Takes the dataset's writer lock first: while another
+        process holds it, raise LockedError naming it, or with ``wait`` wait
+        for it.  The collection holds the lock until :meth:`close`; use it as a
+        context manager.
         """
         versions.check_name(name)
-        spec = json.loads(json.dumps(spec, sort_keys=True))  # compare as stored (tuples become lists)
         if episodes < 1 or episodes_per_file < 1:
             raise ConfigError(f"episodes ({episodes}) and episodes per file ({episodes_per_file}) must be >= 1")
+        lock = ExitStack()
+        lock.enter_context(dataset_lock(name, wait=wait))
+        try:
+            return cls._plan(name, episodes, spec, image_size, episodes_per_file, restart, lock)
+        except BaseException:
+            lock.close()
+            raise
+
+    @classmethod
+    def _plan(
+        cls,
+        name: str,
+        episodes: int,
+        spec: dict[str, Any],
+        image_size: int,
+        episodes_per_file: int,
+        restart: bool,
+        lock: ExitStack,
+    ) -> Collection:
+        """:meth:`begin` under the writer lock: the latest version, the staged plan and the clean-up are read and
+        done only now, so they are never another writer's."""
+        spec = json.loads(json.dumps(spec, sort_keys=True))  # compare as stored (tuples become lists)
         parent = open_version(name) if versions.list_versions(name) else None
         start = parent.num_episodes if parent else 0
         if parent is not None:
@@ -100,7 +164,7 @@ class Collection:
             "first_file": _num_files(parent) if parent else 0,
         }
         staging = versions.dataset_root(name) / layout.STAGING_DIR
-        for stale in versions.dataset_root(name).glob(".tmp-v*"):  # left by a run killed while publishing
+        for stale in versions.dataset_root(name).glob(".tmp-v*"):  # left by a holder killed while publishing
             shutil.rmtree(stale, ignore_errors=True)
         if restart and staging.exists():
             shutil.rmtree(staging)
@@ -118,7 +182,7 @@ class Collection:
         if plan["stop"] > start:
             staging.mkdir(parents=True, exist_ok=True)
             atomic_write_json(staging / PLAN_FILE, plan)
-        return cls(name, plan, parent)
+        return cls(name, plan, parent, lock)
 
     @property
     def start(self) -> int:
@@ -149,6 +213,7 @@ class Collection:
 
     def missing_indices(self) -> list[int]:
         """Episode indices still to collect, in order (staged files after a gap or of another plan are removed)."""
+        self._check_writer()
         staged = self.staged_files()
         for n, _, _ in self.file_ranges()[len(staged) :]:
             for p in (self.staging / layout.data_path(n), self.staging / layout.episodes_path(n)):
@@ -173,6 +238,7 @@ class Collection:
 
     def add(self, episode: writer.EpisodeLike) -> bool:
         """Buffer the next episode (in index order); write a file when one is complete.  True if written."""
+        self._check_writer()
         if self._cursor is None:  # first episode of this run: resume after the staged files
             missing = self.missing_indices()
             if not missing:
@@ -195,7 +261,8 @@ class Collection:
         return next(r for r in self.file_ranges() if r[1] <= index < r[2])
 
     def finish(self, created: dict[str, Any] | None = None) -> DatasetVersion:
-        """Publish the staged files (plus the parent's) as the next version of ``name``."""
+        """Publish the staged files (plus the parent's) as the next version of ``name`` (the lock stays held)."""
+        self._check_writer()
         if self.up_to_date:
             raise ConfigError(f"dataset {self.name} has nothing new to publish")
         staged = self.staged_files()
@@ -305,9 +372,10 @@ def write_dataset(
     created: dict[str, Any] | None = None,
 ) -> DatasetVersion:
     """Write ``count`` episodes (indices continue the latest version) as a new version of ``name``."""
-    latest = versions.list_versions(name)
-    start = open_version(name).num_episodes if latest else 0
-    c = Collection.begin(name, start + count, spec, image_size, episodes_per_file, restart=True)
-    for ep in episodes:
-        c.add(ep)
-    return c.finish(created)
+    with dataset_lock(versions.check_name(name)):  # the latest version cannot change before begin (reentrant)
+        latest = versions.list_versions(name)
+        start = open_version(name).num_episodes if latest else 0
+        with Collection.begin(name, start + count, spec, image_size, episodes_per_file, restart=True) as c:
+            for ep in episodes:
+                c.add(ep)
+            return c.finish(created)

@@ -25,20 +25,7 @@ from . import layout, writer
 from . import stats as statslib
 from .reader import DatasetView, read_episode_stats, read_parquet
 
-CARD = """---
-license: apache-2.0
-task_categories:
-- robotics
-tags:
-- LeRobot
-- nsl
-- grasping
-configs:
-- config_name: default
-  data_files: data/*/*.parquet
----
-
-# {ref}
+CARD = """# {ref}
 
 Simulated vision-based bin grasping episodes collected with nsl ("never stop learning"),
 in LeRobotDataset v3.0 format ({episodes} episodes, {frames} frames, success rate {success:.1%}).
@@ -94,7 +81,7 @@ def export(view: DatasetView, out: Path, repo_id: str | None = None) -> Path:
             (json.dumps(statslib.to_json(statslib.aggregate(per_episode)), indent=4) + "\n").encode(),
         )
         writer.write_tasks(tmp)
-        card = CARD.format(
+        card = _card_metadata() + CARD.format(
             ref=repo_id or view.ref,
             episodes=view.num_episodes,
             frames=view.num_frames,
@@ -113,6 +100,19 @@ def export(view: DatasetView, out: Path, repo_id: str | None = None) -> Path:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return out
+
+
+def _card_metadata() -> str:
+    """The card's YAML front matter (what the Hub indexes the dataset by)."""
+    from huggingface_hub import DatasetCardData
+
+    data = DatasetCardData(
+        license="apache-2.0",
+        task_categories=["robotics"],
+        tags=["LeRobot", "nsl", "grasping"],
+        configs=[{"config_name": "default", "data_files": "data/*/*.parquet"}],
+    )
+    return f"---\n{data.to_yaml()}\n---\n\n"
 
 
 def _table_bytes(table: pa.Table) -> bytes:

@@ -63,18 +63,11 @@ def q_ranking_auc(q: ArrayLike, success: ArrayLike) -> float:
     qa, sa = _q_and_labels(q, success, "Q-ranking AUC")
     if sa.all():
         raise ConfigError("Q-ranking AUC: the held-out set has no failed transitions; hold out more target episodes")
-    order = np.argsort(qa, kind="mergesort")
-    ranks = np.empty(len(qa))
-    sorted_q = qa[order]
-    start = 0
-    while start < len(qa):  # average ranks (1-based) over ties
-        end = start
-        while end + 1 < len(qa) and sorted_q[end + 1] == sorted_q[start]:
-            end += 1
-        ranks[order[start : end + 1]] = 0.5 * (start + end) + 1.0
-        start = end + 1
+    from scipy.stats import mannwhitneyu
+
     n_pos, n_neg = int(sa.sum()), int((~sa).sum())
-    return float((ranks[sa].sum() - n_pos * (n_pos + 1) / 2.0) / (n_pos * n_neg))
+    u = mannwhitneyu(qa[sa], qa[~sa], method="asymptotic").statistic  # U of the successes, midranks over ties
+    return float(u / (n_pos * n_neg))
 
 
 def td_error(q: ArrayLike, target: ArrayLike) -> float:

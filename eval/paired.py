@@ -9,13 +9,12 @@ successes-of-B-only with ``p = 1/2``.  The interval on the difference of the
 two success rates is Newcombe's (1998) hybrid score interval for paired data
 (his method 10), built from the two Wilson intervals.
 
-The exact binomial test comes from ``scipy.stats.binomtest``; scipy has no
-paired-difference interval, so Newcombe's is written out below.
+The exact binomial test comes from ``scipy.stats.binomtest``; Newcombe's
+interval lives in ``nsl.stats`` with every other interval.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
@@ -23,7 +22,7 @@ import numpy as np
 from scipy.stats import binomtest
 
 from nsl.errors import ConfigError
-from nsl.stats import Z95, wilson_interval
+from nsl.stats import newcombe_paired_interval
 
 # --- paired episodes: McNemar ---------------------------------------------------------------------------------------
 
@@ -76,26 +75,7 @@ def mcnemar_exact(only_a: int, only_b: int) -> float:
     return float(binomtest(int(only_a), n, 0.5, alternative="two-sided").pvalue)
 
 
-def paired_difference_interval(
-    both: int, only_a: int, only_b: int, neither: int, z: float = Z95
-) -> tuple[float, float]:
-    """Newcombe's (1998, method 10) interval for success(A) - success(B) on paired outcomes."""
-    n = both + only_a + only_b + neither
-    if n <= 0:
-        return -1.0, 1.0
-    p1, p2 = (both + only_a) / n, (both + only_b) / n
-    l1, u1 = wilson_interval(both + only_a, n, z)
-    l2, u2 = wilson_interval(both + only_b, n, z)
-    margins = (both + only_a) * (only_b + neither) * (both + only_b) * (only_a + neither)
-    phi = 0.0
-    if margins > 0:
-        cross = both * neither - only_a * only_b
-        corrected = cross - n / 2 if cross > n / 2 else (cross if cross < 0 else 0.0)  # continuity correction
-        phi = corrected / math.sqrt(margins)
-    d = p1 - p2
-    low = d - math.sqrt(max(0.0, (p1 - l1) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2) + (u2 - p2) ** 2))
-    high = d + math.sqrt(max(0.0, (u1 - p1) ** 2 - 2 * phi * (u1 - p1) * (p2 - l2) + (p2 - l2) ** 2))
-    return max(-1.0, low), min(1.0, high)
+paired_difference_interval = newcombe_paired_interval  # Newcombe's (1998, method 10) paired interval, in nsl.stats
 
 
 def compare_paired(

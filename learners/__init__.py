@@ -15,6 +15,7 @@ Public surface (other folders import these from ``nsl.learners`` only)::
     Sampler, ArraySampler                              # the data contract and an in-memory sampler
     Checkpoint, load_checkpoint, save_checkpoint, checkpoint_config, checkpoint_id, read_config
     CEMPolicy, load_policy                             # a checkpoint acting in the collectors
+    LeRobotActing                                      # ... and with LeRobot's select_action(batch)
     layer_distances                                    # where a fine-tune changed the weights (Fig. 5.8)
     FeatureConfig, train_features, encoder_features    # supervised features (Table 5.2's ImageNet column)
     load_encoder
@@ -57,7 +58,7 @@ _EXPORTS = {
     ),
     "features": ("encoder_features", "load_encoder", "train_features"),
     "networks": ("QNetwork",),
-    "policy": ("CEMPolicy", "load_policy"),
+    "policy": ("CEMPolicy", "LeRobotActing", "load_policy"),
     "iql": ("IQL", "IQLOptions"),
     "qtopt": ("Learner", "QTOpt", "bellman_target", "update"),
     "sampler": ("ArraySampler", "Sampler", "synthetic_sampler"),
@@ -95,7 +96,7 @@ if TYPE_CHECKING:  # static analysers see the eager imports
     from .features import encoder_features, load_encoder, train_features  # noqa: F401
     from .iql import IQL, IQLOptions  # noqa: F401
     from .networks import QNetwork  # noqa: F401
-    from .policy import CEMPolicy, load_policy  # noqa: F401
+    from .policy import CEMPolicy, LeRobotActing, load_policy  # noqa: F401
     from .qtopt import Learner, QTOpt, bellman_target, update  # noqa: F401
     from .registry import find_learner, learner_names, parse_learner, register_learner  # noqa: F401
     from .sampler import ArraySampler, Sampler, synthetic_sampler  # noqa: F401

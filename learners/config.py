@@ -13,6 +13,7 @@ every checkpoint's ``config.json``:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
@@ -179,7 +180,10 @@ class TrainConfig:
     grad_clip: float = 10.0  # max gradient norm; 0 disables clipping
     gamma: float = 0.9  # discount
     n_step: int = 1  # transitions span up to n steps of the data (n-step returns); the sampler must match
-    polyak: float = 0.995  # target network 1: theta_bar <- polyak * theta_bar + (1 - polyak) * theta, every step
+    # Target network 1, every step: theta_bar <- polyak * theta_bar + tau * theta, tau = 1 - polyak.  State one of
+    # them (SB3 and d3rlpy state tau = 0.005); neither means polyak 0.995.  The stated one is recorded.
+    polyak: float | None = None  # the fraction of the target kept (None when tau is stated)
+    tau: float | None = None  # the fraction of the target updated toward the online network (None: polyak stated)
     lag_period: int = 1000  # target network 2: a copy of the online network, refreshed every lag_period steps
     cem: CemConfig = field(default_factory=CemConfig)  # action maximisation for the Bellman target
     conservative: float | None = None  # weight of scoring uniform random actions as failures (keeps unseen actions
@@ -205,8 +209,9 @@ class TrainConfig:
             raise ConfigError(f"steps {self.steps} must be >= 0 and batch_size {self.batch_size} >= 1")
         if self.lr is not None and not 0 < self.lr < 1:
             raise ConfigError(f"learning rate {self.lr} is out of range; use e.g. 3e-4 (or leave it unset)")
-        if not 0 <= self.gamma <= 1 or not 0 <= self.polyak < 1:
-            raise ConfigError(f"gamma {self.gamma} must be in [0, 1] and polyak {self.polyak} in [0, 1)")
+        if not 0 <= self.gamma <= 1:
+            raise ConfigError(f"gamma {self.gamma} must be in [0, 1]")
+        self._check_target_rate()
         if self.lr_decay < 0 or not 0 <= self.lr_floor <= 1:
             raise ConfigError(
                 f"lr_decay {self.lr_decay} must be >= 0 (0 = constant) and lr_floor {self.lr_floor} in [0, 1]"
@@ -247,6 +252,34 @@ class TrainConfig:
         if self.keep_trainer_state < 1:
             raise ConfigError(f"keep_trainer_state {self.keep_trainer_state} must be at least 1 (resume needs one)")
 
+    def _check_target_rate(self) -> None:
+        polyak, tau = self.polyak, self.tau
+        if polyak is not None and tau is not None:
+            raise ConfigError(f"polyak {polyak:g} and tau {tau:g} both given; state one of them (tau = 1 - polyak)")
+        if tau is not None:
+            if not 0 < tau < 1:
+                raise ConfigError(f"tau {tau:g} is out of range; use (0, 0.5], e.g. 0.005")
+            if tau > 0.5:
+                raise ConfigError(
+                    f"tau {tau:g} replaces {tau:.1%} of the target each step; "
+                    f"you probably mean polyak={tau:g} (tau={1 - tau:g})"
+                )
+            return
+        if polyak is None:
+            object.__setattr__(self, "polyak", polyak := 0.995)
+        if not 0 <= polyak < 1:
+            raise ConfigError(f"polyak {polyak:g} is out of range; use [0.5, 1), e.g. 0.995 (or tau=0.005)")
+        if polyak < 0.5:
+            raise ConfigError(
+                f"polyak {polyak:g} keeps only {polyak:.1%} of the target each step; "
+                f"you probably mean tau={polyak:g} (polyak={1 - polyak:g})"
+            )
+
+    @property
+    def target_polyak(self) -> float:
+        """The fraction of the target network kept each step: ``polyak``, or ``1 - tau`` when tau was stated."""
+        return self.polyak if self.polyak is not None else 1.0 - float(self.tau or 0.0)
+
     def lr_at(self, step: int) -> float:
         """The learning rate of gradient step ``step`` (0-based): ``lr``, cosine-decayed when ``lr_decay`` > 0."""
         if self.lr is None:
@@ -261,6 +294,7 @@ class TrainConfig:
         d["cem"] = self.cem.to_dict()
         if d["precision"] == "fp32":
             del d["precision"]  # absent means fp32: configs (and checkpoint ids) made before the option hold
+        del d["tau" if self.tau is None else "polyak"]  # the stated one: configs made before tau keep their ids
         if d["learner"] == "qtopt" and not d["learner_options"]:
             del d["learner"], d["learner_options"]  # absent means QT-Opt: the same for the learner interface
         return d
@@ -270,7 +304,11 @@ class TrainConfig:
         return cls(**_known(cls, d, "training"))
 
     def replace(self, **changes: Any) -> TrainConfig:
-        return type(self)(**{**{f.name: getattr(self, f.name) for f in fields(self)}, **changes})
+        """A copy with ``changes``; stating ``polyak`` or ``tau`` drops the other."""
+        for one, other in (("polyak", "tau"), ("tau", "polyak")):
+            if one in changes and other not in changes:
+                changes[other] = None
+        return dataclasses.replace(self, **changes)
 
 
 @dataclass(frozen=True)

@@ -137,7 +137,7 @@ class IQL(Algorithm):
             q_loss.backward()
             grad_norm = torch.nn.utils.clip_grad_norm_(q.trainable_parameters(), clip)
             state.optimizer.step()
-            polyak_update(state.polyak, q, cfg.polyak)
+            polyak_update(state.polyak, q, cfg.target_polyak)
 
         qs = torch.sigmoid(logits.detach())
         live = done < 0.5

@@ -18,6 +18,11 @@ pass ``functools.partial(load_policy, checkpoint_dir)``: it pickles as a path
 and loads the checkpoint inside the worker.  :meth:`CEMPolicy.describe`
 records the checkpoint by its content id, never by its path, because it goes
 into the hashed metadata of the datasets the policy collects.
+
+:class:`LeRobotActing` gives a loaded policy LeRobot's calling convention as
+well: ``select_action({"observation.image": (B, 3, H, W) float in [0, 1],
+"observation.state": (B, 6)})`` returns a (B, 6) action tensor, and ``reset()``
+starts its random draws over (what ``nsl.load_policy`` returns).
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from nsl import keys
 from nsl.errors import ConfigError
 
 from .augment import to_float
@@ -183,3 +189,47 @@ def acting_policy(algo: Any, net: QNetwork, cem: CemConfig, **kwargs: Any) -> CE
     else CEM over its Q-function (what the built-in learners do).  ``kwargs`` go to the policy (name, info,
     epsilon, precision, ...)."""
     return algo.policy(net, cem, **kwargs) or CEMPolicy(net, cem, **kwargs)
+
+
+class LeRobotActing:
+    """A policy that acts both as nsl calls it, ``policy(obs, rngs=...)``, and as LeRobot's policies are called,
+    ``select_action(batch)``: a dict of tensors (``observation.image`` (B, 3, H, W) float in [0, 1] or uint8
+    (B, H, W, 3), ``observation.state`` (B, 6)) in, a (B, 6) float32 action tensor out.
+
+    ``select_action`` draws each row's CEM and exploration noise from a generator seeded with ``seed``;
+    ``reset()`` (which LeRobot calls at each episode's start) seeds it again.  Other attributes are the
+    wrapped policy's (``describe()``, ``q_values()``, ``name``, ...).
+    """
+
+    def __init__(self, policy: Any, seed: int = 0):
+        self.policy = policy
+        self.seed = seed
+        self._rng = np.random.default_rng(seed)
+
+    def __call__(self, obs: dict[str, np.ndarray], **kwargs: Any) -> np.ndarray:
+        return self.policy(obs, **kwargs)
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "policy":  # not set yet (e.g. while unpickling): no recursion
+            raise AttributeError(name)
+        return getattr(self.policy, name)
+
+    def reset(self) -> None:
+        self._rng = np.random.default_rng(self.seed)
+
+    def select_action(self, batch: dict[str, Any]) -> torch.Tensor:
+        missing = [k for k in (keys.OBS_IMAGE, keys.OBS_STATE) if k not in batch]
+        if missing:
+            raise ConfigError(
+                f"select_action needs {keys.OBS_IMAGE!r} and {keys.OBS_STATE!r}; the batch lacks {missing} "
+                "(lerobot.envs.utils.preprocess_observation makes them from GraspEnv(obs_type='pixels_agent_pos'))"
+            )
+        image = torch.as_tensor(batch[keys.OBS_IMAGE]).detach().cpu()
+        state = torch.as_tensor(batch[keys.OBS_STATE]).detach().cpu()
+        if image.ndim == 3:  # one observation, unbatched
+            image, state = image.unsqueeze(0), state.reshape(1, -1)
+        if image.dtype != torch.uint8:  # LeRobot's layout: channels first, in [0, 1]
+            image = image.permute(0, 2, 3, 1).mul(255.0).round().clamp(0, 255).to(torch.uint8)
+        obs = {"image": image.numpy(), "state": state.float().numpy()}
+        rngs = self._rng.spawn(len(image))
+        return torch.from_numpy(np.asarray(self.policy(obs, rngs=rngs), np.float32))

@@ -185,7 +185,7 @@ def update(learner: Learner, batch: dict[str, torch.Tensor], cfg: TrainConfig, s
     grad_norm = torch.nn.utils.clip_grad_norm_(params, cfg.grad_clip if cfg.grad_clip > 0 else float("inf"))
     learner.optimizer.step()
 
-    polyak_update(learner.polyak, net, cfg.polyak)
+    polyak_update(learner.polyak, net, cfg.target_polyak)
     if (step + 1) % cfg.lag_period == 0:
         learner.lagged.load_state_dict(net.state_dict())
 

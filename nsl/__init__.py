@@ -4,6 +4,7 @@ The Python API is this package's functions (``nsl.api``, loaded on first use)::
 
     nsl.collect  nsl.train  nsl.evaluate  nsl.report  nsl.continual  nsl.online  nsl.efficiency  nsl.push  nsl.pull
     nsl.features  nsl.study_run  nsl.study_status  nsl.study_report  nsl.transfer_run  nsl.build_curriculum
+    nsl.load_policy (a checkpoint from a folder, a catalog reference or the Hub, with LeRobot's select_action)
 
 with their configs (``nsl.CollectConfig``, ``nsl.TrainOptions``, ...) and the
 named scene seeds (``nsl.SELECTION_SCENES``, ...); ``docs/python.md`` walks
@@ -35,9 +36,12 @@ repository root to ``__path__`` so the same names resolve to the root folders.
 from __future__ import annotations
 
 import os as _os
+from typing import TYPE_CHECKING
 
 from nsl.lazy import lazy_exports
-from nsl.version import __version__, code_version  # noqa: F401  (re-exported)
+
+if TYPE_CHECKING:
+    from nsl.version import __version__, code_version  # noqa: F401  (re-exported, read on first use)
 
 _root = _os.path.dirname(_os.path.dirname(_os.path.abspath(__file__)))
 if _os.path.isfile(_os.path.join(_root, "pyproject.toml")) and _os.path.isdir(_os.path.join(_root, "collectors")):
@@ -63,6 +67,7 @@ _API = (
     "efficiency",
     "evaluate",
     "features",
+    "load_policy",
     "online",
     "pull",
     "push",
@@ -76,4 +81,6 @@ _API = (
 )
 
 
-_, __getattr__, __dir__ = lazy_exports(__name__, {"api": _API}, globals())  # loaded on first use (PEP 562)
+_, __getattr__, __dir__ = lazy_exports(  # loaded on first use (PEP 562)
+    __name__, {"api": _API, "version": ("__version__", "code_version")}, globals()
+)

@@ -42,6 +42,7 @@ from nsl.services.options import (
 )
 
 if TYPE_CHECKING:
+    from nsl.learners import LeRobotActing
     from nsl.services.continual import ContinualResult
     from nsl.services.evaluate import EvaluationResult
     from nsl.services.features import FeaturesResult
@@ -57,7 +58,15 @@ __all__ = list(_API)  # the names `import nsl` offers (nsl/__init__.py lists the
 def _settle(cls: type[C], config: C | None, fields: Mapping[str, Any], call: str) -> C:
     """``config`` with ``fields`` changed, or a new ``cls(**fields)``; unknown names fail in one line."""
     known = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    if "batch_size" in fields and "num_envs" in known:  # environments per worker: batch_size in nsl 0.1
+        import warnings
+
+        warnings.warn(
+            f"nsl.{call}(batch_size=...) is now num_envs=...; the old name will go away", FutureWarning, stacklevel=3
+        )
+        fields = {**{k: v for k, v in fields.items() if k != "batch_size"}, "num_envs": fields["batch_size"]}
     unknown = sorted(set(fields) - known)
+
     if unknown:
         raise ConfigError(
             f"nsl.{call}() has no setting {', '.join(unknown)}; the settings are {', '.join(sorted(known))}"
@@ -79,25 +88,36 @@ def collect(
     restart: bool = False,
     cluster: str | None = None,
     progress: bool = True,
+    wait: bool = False,
     **fields: Any,
 ):
     """Collect episodes into a versioned dataset (``nsl collect``); returns the published DatasetVersion.
 
     The result's ``ref`` (``NAME@vN``), ``hash``, ``num_episodes`` and ``root`` name what was written; the version
-    is registered in the catalog.  Calling it again resumes an interrupted collection.
+    is registered in the catalog.  Calling it again resumes an interrupted collection.  While another process
+    writes the dataset this raises :class:`~nsl.errors.LockedError` naming it; ``wait=True`` waits for it.
     """
     from nsl.services.collect import collect as run
 
-    return run(_settle(CollectConfig, config, fields, "collect"), restart=restart, cluster=cluster, progress=progress)
+    return run(
+        _settle(CollectConfig, config, fields, "collect"),
+        restart=restart,
+        cluster=cluster,
+        progress=progress,
+        wait=wait,
+    )
 
 
-def train(options: TrainOptions | None = None, /, *, progress: bool = True, **fields: Any) -> TrainResult:
+def train(
+    options: TrainOptions | None = None, /, *, progress: bool = True, wait: bool = False, **fields: Any
+) -> TrainResult:
     """Pre-train (no ``init``) or fine-tune (``init="ckpt:..."``) offline, and catalogue it (``nsl train``).
 
     ``data`` is a list of ``"REF[=WEIGHT]"`` strings or ``(ref, weight)`` pairs; ``net`` a list of
     ``"FIELD=VALUE"`` strings or a mapping.  Returns a :class:`~nsl.services.train.TrainResult` whose
     ``checkpoint`` (``ckpt:NAME@STEP``) and ``id`` name the catalogued checkpoint, and ``best`` the step early
-    stopping chose.
+    stopping chose.  While another process writes run ``name`` this raises :class:`~nsl.errors.LockedError`
+    naming it; ``wait=True`` waits for it.
     """
     from nsl.services.train import train as run
 
@@ -110,7 +130,7 @@ def train(options: TrainOptions | None = None, /, *, progress: bool = True, **fi
             if isinstance(net, Mapping)
             else tuple(net)
         )
-    return run(_settle(TrainOptions, options, fields, "train"), progress=progress)
+    return run(_settle(TrainOptions, options, fields, "train"), progress=progress, wait=wait)
 
 
 def evaluate(
@@ -141,8 +161,42 @@ def evaluate(
     )
 
 
+def load_policy(
+    source: str | Path,
+    /,
+    *,
+    epsilon: float = 0.0,
+    action_noise: float = 0.0,
+    precision: str = "fp32",
+    seed: int = 0,
+    **cem: Any,
+) -> LeRobotActing:
+    """A checkpoint's policy, from a folder, a catalog reference (``ckpt:NAME[@STEP|@best]``) or a shared
+    checkpoint (a Hub repo id ``OWNER/NAME``, ``hf://OWNER/NAME[@REV]``, ``s3://...``), as ``from_pretrained``
+    loads a model; a shared one is pulled and hash-verified into the workspace's cache, not catalogued.
+
+    It acts as nsl's policies do, ``policy(obs, rngs=...)`` on ``{"image", "state"}`` numpy batches, and as
+    LeRobot's do, ``policy.select_action(batch)`` on ``observation.image`` / ``observation.state`` tensors
+    (``seed`` seeds its draws; ``reset()`` starts them over).  ``epsilon``, ``action_noise``, ``precision``
+    and CEM settings (``cem``) are those of ``nsl.learners.load_policy``.
+    """
+    from nsl.learners import LeRobotActing
+    from nsl.learners import load_policy as load
+    from nsl.services.share import checkpoint_folder
+
+    folder = checkpoint_folder(source)
+    policy = load(folder, epsilon=epsilon, action_noise=action_noise, precision=precision, **cem)
+    return LeRobotActing(policy, seed=seed)
+
+
 def continual(
-    config: ContinualConfig | None = None, /, *, name: str = "continual", progress: bool = True, **fields: Any
+    config: ContinualConfig | None = None,
+    /,
+    *,
+    name: str = "continual",
+    progress: bool = True,
+    wait: bool = False,
+    **fields: Any,
 ) -> ContinualResult:
     """Fine-tune through a sequence of shifts; the performance matrix, forgetting and transfer (``nsl continual``).
 
@@ -154,11 +208,17 @@ def continual(
         fields["sequence"] = tuple(s.strip() for s in fields["sequence"].split(",") if s.strip())
     elif "sequence" in fields:
         fields["sequence"] = tuple(fields["sequence"])
-    return run(_settle(ContinualConfig, config, fields, "continual"), name, progress=progress)
+    return run(_settle(ContinualConfig, config, fields, "continual"), name, progress=progress, wait=wait)
 
 
 def online(
-    config: OnlineConfig | None = None, /, *, name: str = "online", progress: bool = True, **fields: Any
+    config: OnlineConfig | None = None,
+    /,
+    *,
+    name: str = "online",
+    progress: bool = True,
+    wait: bool = False,
+    **fields: Any,
 ) -> OnlineResult:
     """Online fine-tuning in rounds: the policy collects in the target shift and is fine-tuned on everything
     collected so far, mixed with base data (``nsl online``).  Resumes a run of the same ``name``."""
@@ -169,22 +229,34 @@ def online(
             fields[key] = (fields[key],)
         elif key in fields:
             fields[key] = tuple(fields[key])
-    return run(_settle(OnlineConfig, config, fields, "online"), name, progress=progress)
+    return run(_settle(OnlineConfig, config, fields, "online"), name, progress=progress, wait=wait)
 
 
 def features(
-    config: FeaturesConfig | None = None, /, *, name: str = "features", progress: bool = True, **fields: Any
+    config: FeaturesConfig | None = None,
+    /,
+    *,
+    name: str = "features",
+    progress: bool = True,
+    wait: bool = False,
+    **fields: Any,
 ) -> FeaturesResult:
     """Supervised features (``nsl features``): the trunk of ``like``'s architecture trained to classify the 899
     train objects from rendered frames, or a torchvision ResNet from ``encoder=PATH``, catalogued as
     ``ckpt:NAME``; fine-tune it with ``method="new_head"`` or ``"new_head_frozen"``."""
     from nsl.services.features import features as run
 
-    return run(_settle(FeaturesConfig, config, fields, "features"), name, progress=progress)
+    return run(_settle(FeaturesConfig, config, fields, "features"), name, progress=progress, wait=wait)
 
 
 def efficiency(
-    config: EfficiencyConfig | None = None, /, *, name: str = "efficiency", progress: bool = True, **fields: Any
+    config: EfficiencyConfig | None = None,
+    /,
+    *,
+    name: str = "efficiency",
+    progress: bool = True,
+    wait: bool = False,
+    **fields: Any,
 ):
     """Fine-tune on each tier of the target data and evaluate (``nsl efficiency``); returns the TierResults.
 
@@ -195,7 +267,7 @@ def efficiency(
     for key in ("data", "sizes"):
         if key in fields:
             fields[key] = tuple(fields[key])
-    return run(_settle(EfficiencyConfig, config, fields, "efficiency"), name, progress=progress)
+    return run(_settle(EfficiencyConfig, config, fields, "efficiency"), name, progress=progress, wait=wait)
 
 
 def report(run: str | Path, *, out: str | Path | None = None, title: str | None = None):
@@ -252,16 +324,18 @@ def study_run(
     cluster: str | None = None,
     unit_cpus: float = 1.0,
     store: str | None = None,
+    wait: bool = False,
 ) -> StudyRun:
     """Run (or resume) a study plan (``tiny``, ``small``, ``full``, ``paper`` or a TOML path) and write its report.
 
     ``cluster`` (``ray``, ``auto``, ``ray://HOST:PORT``; None: ``$NSL_CLUSTER``, else local) runs every unit as a
     Ray task holding ``unit_cpus`` CPUs; ``store`` (an fsspec URL; None: ``$NSL_STORE``) is for nodes that share
-    no ``NSL_HOME`` (docs/scale.md)."""
+    no ``NSL_HOME`` (docs/scale.md).  While another process runs the study this raises
+    :class:`~nsl.errors.LockedError` naming it; ``wait=True`` waits for it, then resumes."""
     from nsl.study import run_study, study_dir
 
     status = run_study(
-        plan, name, workers=workers, progress=progress, cluster=cluster, unit_cpus=unit_cpus, store=store
+        plan, name, workers=workers, progress=progress, cluster=cluster, unit_cpus=unit_cpus, store=store, wait=wait
     )
     folder = study_dir(status["study"])
     return StudyRun(status["study"], folder, folder / "report.md", status)
@@ -290,14 +364,15 @@ def transfer_run(
     cluster: str | None = None,
     unit_cpus: float = 1.0,
     store: str | None = None,
+    wait: bool = False,
 ) -> StudyRun:
     """Measure a transfer-advantage matrix (``nsl transfer run``); the report holds matrix.json and matrix.md.
 
-    ``cluster``, ``unit_cpus`` and ``store`` as for :func:`study_run`."""
+    ``cluster``, ``unit_cpus``, ``store`` and ``wait`` as for :func:`study_run`."""
     from nsl.study import run_transfer
 
     status, report = run_transfer(
-        plan, name, workers=workers, progress=progress, cluster=cluster, unit_cpus=unit_cpus, store=store
+        plan, name, workers=workers, progress=progress, cluster=cluster, unit_cpus=unit_cpus, store=store, wait=wait
     )
     folder = Path(report["matrix"]).parent
     return StudyRun(folder.name, folder, Path(report["report"]), {**status, "report": report})

@@ -43,7 +43,6 @@ TRAINER_FILE = "trainer_state.pt"
 CONTENT_FILES = (WEIGHTS_FILE, CONFIG_FILE)  # the files the checkpoint id covers
 TMP_PREFIX = ".tmp-"  # temporary folders; `nsl catalog gc` removes stale ones
 TMP_SUFFIX = ".tmp"
-_CHUNK = 1 << 20
 
 FileSource = bytes | Path  # what a folder file is made from: its bytes, or an existing file to link or copy
 
@@ -96,13 +95,11 @@ def read_config(folder: Path) -> dict[str, Any]:
 # --------------------------------------------------------------------- ids
 def checkpoint_id(weights: bytes | Path, config: Mapping[str, Any]) -> str:
     """The checkpoint id: sha256 over the weights file bytes, a NUL byte and the canonical config."""
-    h = hashlib.sha256()
     if isinstance(weights, (bytes, bytearray, memoryview)):
-        h.update(weights)
+        h = hashlib.sha256(weights)
     else:
         with open(weights, "rb") as f:
-            while chunk := f.read(_CHUNK):
-                h.update(chunk)
+            h = hashlib.file_digest(f, "sha256")
     h.update(b"\0")
     h.update(canonical_config(config))
     return h.hexdigest()

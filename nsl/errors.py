@@ -34,6 +34,10 @@ class IncompatibleVersionError(NslError):
     """A file or database comes from a version of nsl this code cannot read."""
 
 
+class LockedError(NslError):
+    """Another process is writing the same dataset, run or study (it holds the writer lock, :mod:`nsl.locks`)."""
+
+
 class EnvironmentSetupError(NslError, RuntimeError):
     """The machine lacks something nsl needs (for example an OpenGL backend)."""
 

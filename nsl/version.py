@@ -2,12 +2,37 @@
 
 from __future__ import annotations
 
+import functools
 import os
 import subprocess
-
-__version__ = "0.1.0"
+from typing import Any
 
 _ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@functools.cache
+def installed_version() -> str:
+    """The version pyproject.toml states, as the installed package's metadata records it."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("nsl")
+    except PackageNotFoundError:  # a source tree run without installing: read pyproject.toml itself
+        import tomllib
+
+        try:
+            with open(os.path.join(_ROOT, "pyproject.toml"), "rb") as f:
+                return str(tomllib.load(f)["project"]["version"])
+        except (OSError, KeyError, tomllib.TOMLDecodeError):
+            return "0+unknown"
+
+
+def __getattr__(name: str) -> Any:
+    """``__version__``, read on first use (importing importlib.metadata costs more than the rest of ``import nsl``)."""
+    if name == "__version__":
+        globals()["__version__"] = value = installed_version()
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def code_version() -> str:
@@ -23,7 +48,7 @@ def code_version() -> str:
                 text=True,
                 timeout=5,
             ).stdout.strip()
-            return f"{__version__}+g{out.stdout.strip()}{'.dirty' if dirty else ''}"
+            return f"{installed_version()}+g{out.stdout.strip()}{'.dirty' if dirty else ''}"
     except (OSError, subprocess.SubprocessError):
         pass
-    return __version__
+    return installed_version()

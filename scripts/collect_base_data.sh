@@ -4,6 +4,6 @@
 # docs/experiments/base-policy.md, "The shipped base policy"). Outputs go to $NSL_HOME; re-running resumes.
 set -euo pipefail
 NSL=${NSL:-.venv/bin/nsl}
-$NSL collect --shift base --episodes 4000 --policy oracle:0.5 --data grasp-base-oracle --seed 1 --workers 2 --batch-size 8
-$NSL collect --shift base --episodes 2000 --policy oracle:1.0 --data grasp-base-noisy --seed 2 --workers 2 --batch-size 8
-$NSL collect --shift base --episodes 2000 --policy random --data grasp-base-random --seed 3 --workers 2 --batch-size 8
+$NSL collect --shift base --episodes 4000 --policy oracle:0.5 --data grasp-base-oracle --seed 1 --workers 2 --num-envs 8
+$NSL collect --shift base --episodes 2000 --policy oracle:1.0 --data grasp-base-noisy --seed 2 --workers 2 --num-envs 8
+$NSL collect --shift base --episodes 2000 --policy random --data grasp-base-random --seed 3 --workers 2 --num-envs 8

@@ -17,7 +17,7 @@ $NSL eval --policy random,oracle:0.5,oracle --shift all --episodes 100 --workers
 echo "== 3. Base-task data, and harsh-lighting data that the base policy collects itself (the study's protocol)"
 NSL=$NSL bash scripts/collect_base_data.sh   # the 8,000 scripted episodes of the base's pre-training data
 $NSL collect --shift harsh_lighting@2 --episodes 800 --policy ckpt:base --epsilon 0.1 --data demo-harsh \
-  --workers $W --batch-size 8
+  --workers $W --num-envs 8
 $NSL dataset tiers demo-harsh --sizes 100,200,400,800
 
 echo "== 4. Pre-train a Q-function offline on the base data (short, to show the command; the shipped base is next)"

@@ -38,15 +38,18 @@ def collect(
     cluster: str | None = None,
     progress: bool = True,
     register: bool = True,
+    wait: bool = False,
 ):
     """Collect ``cfg.episodes`` episodes into dataset ``cfg.data`` (resuming or appending); returns its DatasetVersion.
 
     ``restart`` discards an unfinished collection; ``cluster`` runs the episodes on Ray (None: ``$NSL_CLUSTER``
     or local processes).  An interruption raises KeyboardInterrupt with the finished files staged, so the same
     call resumes.  ``register=False`` leaves the catalog alone (:func:`on_version_created` records the version
-    later, in the process that writes the catalog).
+    later, in the process that writes the catalog).  One process writes a dataset at a time: while another
+    holds its writer lock this raises LockedError naming it, or with ``wait`` waits for it (then resumes or
+    appends to what it wrote, or finds the dataset up to date).
     """
-    from nsl.collectors import EnvConfig, collect_episodes
+    from nsl.collectors import EnvConfig
     from nsl.datasets import api
 
     from .refs import policy_factory
@@ -56,7 +59,17 @@ def collect(
         cfg.policy, env_config, epsilon=cfg.epsilon, action_noise=cfg.action_noise, precision=cfg.precision
     )
     spec = {"env": env_config.to_dict(), "policy": make_policy().describe(), "policy_ref": cfg.policy, "seed": cfg.seed}
-    coll = api.Collection.begin(cfg.data, cfg.episodes, spec, cfg.image_size, cfg.episodes_per_file, restart=restart)
+    coll = api.Collection.begin(
+        cfg.data, cfg.episodes, spec, cfg.image_size, cfg.episodes_per_file, restart=restart, wait=wait
+    )
+    with coll:  # holds the dataset's writer lock to the end
+        return _run(coll, cfg, env_config, make_policy, stop_after_files, cluster, progress, register)
+
+
+def _run(coll, cfg: CollectConfig, env_config, make_policy, stop_after_files: int, cluster, progress, register):
+    """:func:`collect` once the collection is begun (under the dataset's writer lock)."""
+    from nsl.collectors import collect_episodes
+
     if coll.up_to_date:
         v = coll.parent
         assert v is not None  # only a dataset that already has a version can be up to date
@@ -90,7 +103,7 @@ def collect(
         created={
             "command": "nsl collect " + shlex.join(_argv(cfg)),
             "workers": cfg.workers,
-            "batch_size": cfg.batch_size,
+            "num_envs": cfg.num_envs,
             "cluster": ex.name,
             "collect_seconds": round(time.perf_counter() - started, 2),
             "config": asdict(cfg),
@@ -122,7 +135,7 @@ def _collect(
     if not missing:
         return
     episodes = collect_episodes(
-        env_config, make_policy, missing, seed=cfg.seed, workers=cfg.workers, batch=cfg.batch_size
+        env_config, make_policy, missing, seed=cfg.seed, workers=cfg.workers, batch=cfg.num_envs
     )
     bar = progress_bar(
         total=len(missing), unit="ep", desc=f"collect {cfg.data}", dynamic_ncols=True, disable=not progress

@@ -9,7 +9,7 @@ the first unfinished stage (collection and training resume inside a stage).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -31,8 +31,20 @@ class ContinualResult:
     checkpoints: dict[str, str]  # {stage shift: catalog id}
 
 
-def continual(config: ContinualConfig, name: str = "continual", *, progress: bool = True) -> ContinualResult:
-    """Run (or resume) the sequence ``config.sequence`` as run ``name``."""
+def continual(
+    config: ContinualConfig, name: str = "continual", *, progress: bool = True, wait: bool = False
+) -> ContinualResult:
+    """Run (or resume) the sequence ``config.sequence`` as run ``name``.
+
+    Holds run ``name``'s writer lock: while another process runs it this raises LockedError naming it, or with
+    ``wait`` waits for it."""
+    from nsl.locks import run_lock
+
+    with run_lock(name, wait=wait):
+        return _continual(config, name, progress)
+
+
+def _continual(config: ContinualConfig, name: str, progress: bool) -> ContinualResult:
     from nsl import workspace
     from nsl.catalog import Catalog
     from nsl.collectors import parse_shift
@@ -55,7 +67,7 @@ def continual(config: ContinualConfig, name: str = "continual", *, progress: boo
     with Catalog() as cat:
         init = resolve_init(cat, config.init)
     api.open_view(config.base_data)
-    cfg = ContinualConfig(**{**asdict(config), "sequence": tuple(s.name for s in specs)})
+    cfg = replace(config, sequence=tuple(s.name for s in specs))
     run_dir = open_run(name, cfg)
 
     tasks = ("base", *cfg.sequence)
@@ -105,7 +117,7 @@ def _stage(run: str, i: int, shift: str, policy: str, cfg: ContinualConfig, prog
             policy=policy,
             data=data,
             workers=cfg.workers,
-            batch_size=8,
+            num_envs=8,
             seed=cfg.seed + i,
             epsilon=cfg.epsilon,
         ),

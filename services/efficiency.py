@@ -22,12 +22,20 @@ from .options import EfficiencyConfig, EvaluateOptions
 __all__ = ["EfficiencyConfig", "efficiency"]
 
 
-def efficiency(config: EfficiencyConfig, name: str = "efficiency", *, progress: bool = True):
+def efficiency(config: EfficiencyConfig, name: str = "efficiency", *, progress: bool = True, wait: bool = False):
     """Run (or resume) a sample-efficiency sweep as run ``name``; returns the TierResults written to RUN/tiers.json.
 
     ``config.data`` names whole target datasets; they are pinned to their versions (``NAME@vN``) in the saved
-    config.
+    config.  Holds run ``name``'s writer lock: while another process runs it this raises LockedError naming it,
+    or with ``wait`` waits for it.
     """
+    from nsl.locks import run_lock
+
+    with run_lock(name, wait=wait):
+        return _efficiency(config, name, progress)
+
+
+def _efficiency(config: EfficiencyConfig, name: str, progress: bool):
     from nsl.catalog import Catalog
     from nsl.datasets import api
     from nsl.errors import ConfigError

@@ -56,24 +56,25 @@ def evaluate(
     from .refs import policy_factory
 
     o = options
-    shift, severity, episodes, workers, batch_size, split, seed = (
+    shift, severity, episodes, workers, num_envs, split, seed = (
         o.shift,
         o.severity,
         o.episodes,
         o.workers,
-        o.batch_size,
+        o.num_envs,
         o.split,
         o.seed,
     )
 
     if episodes < 1:
         raise ConfigError(f"--episodes {episodes} must be at least 1")
-    if workers < 1 or batch_size < 1:
-        raise ConfigError(f"--workers {workers} and --batch-size {batch_size} must be at least 1")
+    if workers < 1 or num_envs < 1:
+        raise ConfigError(f"--workers {workers} and --num-envs {num_envs} must be at least 1")
     if not refs:
         raise ConfigError("no policy to evaluate; give --checkpoint REF or --policy REF")
     shifts = parse_shift_list(shift, severity)
-    config = EvalConfig(episodes=episodes, split=split, seed=seed, workers=workers, batch=batch_size)
+    config = EvalConfig(episodes=episodes, split=split, seed=seed, workers=workers, batch=num_envs)
+
     from nsl.learners.precision import resolve_precision
 
     precision = resolve_precision(o.precision)

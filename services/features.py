@@ -40,12 +40,25 @@ class FeaturesResult:
 
 
 def features(
-    config: FeaturesConfig, name: str = "features", *, progress: bool = True, register: bool = True
+    config: FeaturesConfig,
+    name: str = "features",
+    *,
+    progress: bool = True,
+    register: bool = True,
+    wait: bool = False,
 ) -> FeaturesResult:
     """Train (or import) supervised features as checkpoint ``name``; the same call again returns it.
 
     ``register=False`` writes the checkpoint folder but leaves the catalog to :func:`register_features` (a study
-    unit on a cluster node)."""
+    unit on a cluster node).  Holds run ``name``'s writer lock: while another process writes it this raises
+    LockedError naming it, or with ``wait`` waits for it."""
+    from nsl.locks import run_lock
+
+    with run_lock(name, wait=wait):
+        return _features(config, name, progress, register)
+
+
+def _features(config: FeaturesConfig, name: str, progress: bool, register: bool) -> FeaturesResult:
     from nsl.catalog import Catalog
     from nsl.learners import FeatureConfig, TrainConfig, encoder_features, load_checkpoint, train_features
 

@@ -73,8 +73,18 @@ def check(config: OnlineConfig) -> None:
         raise ConfigError("--base-data is empty; give the base dataset(s) mixed into every round, or --ratio 1")
 
 
-def online(config: OnlineConfig, name: str = "online", *, progress: bool = True) -> OnlineResult:
-    """Run (or resume) ``config.rounds`` rounds of collection and fine-tuning as run ``name``."""
+def online(config: OnlineConfig, name: str = "online", *, progress: bool = True, wait: bool = False) -> OnlineResult:
+    """Run (or resume) ``config.rounds`` rounds of collection and fine-tuning as run ``name``.
+
+    Holds run ``name``'s writer lock: while another process runs it this raises LockedError naming it, or with
+    ``wait`` waits for it."""
+    from nsl.locks import run_lock
+
+    with run_lock(name, wait=wait):
+        return _online(config, name, progress)
+
+
+def _online(config: OnlineConfig, name: str, progress: bool) -> OnlineResult:
     from nsl import workspace
     from nsl.catalog import Catalog
     from nsl.datasets import api
@@ -91,6 +101,8 @@ def online(config: OnlineConfig, name: str = "online", *, progress: bool = True)
     path = run_dir / ROUNDS_FILE
     rows: list[dict[str, Any]] = json.loads(path.read_text()) if path.exists() else []
     policy, collected = f"ckpt:{init.id}", []
+    envs: dict[str, Any] = {} if config.num_envs is None else {"num_envs": config.num_envs}  # None: the defaults
+
     for i in range(config.rounds + 1):
         if i > 0:
             data = f"{name}-r{i}"
@@ -103,6 +115,7 @@ def online(config: OnlineConfig, name: str = "online", *, progress: bool = True)
                     workers=config.workers,
                     seed=config.seed + i,
                     epsilon=config.epsilon,
+                    **envs,
                 ),
                 progress=progress,
             )
@@ -127,7 +140,11 @@ def online(config: OnlineConfig, name: str = "online", *, progress: bool = True)
         rate = evaluate_service.evaluate(
             [policy],
             EvaluateOptions(
-                shift=config.shift, episodes=config.eval_episodes, seed=config.eval_scenes, workers=config.workers
+                shift=config.shift,
+                episodes=config.eval_episodes,
+                seed=config.eval_scenes,
+                workers=config.workers,
+                **envs,
             ),
             progress=progress,
             source="online",

@@ -55,7 +55,7 @@ class CollectConfig:
     data: str = option(None, "name of the dataset to write (an existing name resumes or appends)")
     workers: int = option(1, "simulator processes (the data does not depend on it)")
     seed: int = option(0, "collection seed: episode i is a pure function of (seed, i)")
-    batch_size: int = option(1, "environments per worker stepping in lock-step; the policy acts on them as one batch")
+    num_envs: int = option(1, "environments per worker stepping in lock-step; the policy acts on them as one batch")
     split: str = option("train", "object split", choices=("train", "test"))
     image_size: int = option(64, "camera resolution in pixels")
     episodes_per_file: int = option(100, "episodes per Parquet file, also the resume granularity")
@@ -78,8 +78,8 @@ class CollectConfig:
                 raise ConfigError(f"collect needs {name}; give --{name.replace('_', '-')}")
         if self.episodes < 1:
             raise ConfigError(f"--episodes {self.episodes} must be at least 1")
-        if self.workers < 1 or self.batch_size < 1:
-            raise ConfigError(f"--workers {self.workers} and --batch-size {self.batch_size} must be at least 1")
+        if self.workers < 1 or self.num_envs < 1:
+            raise ConfigError(f"--workers {self.workers} and --num-envs {self.num_envs} must be at least 1")
         if self.episodes_per_file < 1:
             raise ConfigError(f"--episodes-per-file {self.episodes_per_file} must be at least 1")
         if not 0.0 <= self.epsilon <= 1.0:
@@ -110,7 +110,7 @@ class EvaluateOptions:
     severity: float | None = option(None, "severity for shifts given without @X")
     episodes: int = option(EvalConfig.episodes, "episodes per shift")
     workers: int = option(EvalConfig.workers, "worker processes (the results do not depend on it)")
-    batch_size: int = option(
+    num_envs: int = option(
         EvalConfig.batch, "environments per worker stepping in lock-step; the policy acts on them as one batch"
     )
     split: str = option(EvalConfig.split, "object split", choices=("train", "test"))
@@ -285,7 +285,13 @@ class OnlineConfig:
     eval_episodes: int = option(EvalConfig.episodes, "evaluation episodes after each round")
     eval_scenes: int = option(EvalConfig.seed, "scene seed of the evaluations (nsl eval --seed)")
     workers: int = option(1, "simulator processes for collection and evaluation")
+    num_envs: int | None = option(
+        None,
+        "environments per worker stepping in lock-step, in collection and evaluation (default: nsl collect's and "
+        "nsl eval's)",
+    )
     seed: int = option(0, "round i collects with scene seed SEED + i; every round trains with SEED")
+
     precision: str = option(
         TrainConfig.precision,
         "every round's training passes: fp32, bf16 (CPU bfloat16 autocast) or auto (bf16 where the CPU has it); "

@@ -135,9 +135,10 @@ def open_run(name: str, config):
     """The run folder ``$NSL_HOME/runs/NAME`` of a pipeline, holding ``config`` (a dataclass) as config.json.
 
     A run of that name with another configuration is refused, so running the same call again resumes it.
+    A setting added after the run was made matches it at its default (e.g. ``OnlineConfig.num_envs``).
     """
     import json
-    from dataclasses import asdict
+    from dataclasses import MISSING, asdict, fields
 
     from nsl import workspace
     from nsl.errors import ConfigError
@@ -145,7 +146,11 @@ def open_run(name: str, config):
     run_dir = workspace.runs_dir() / name
     run_dir.mkdir(parents=True, exist_ok=True)
     path = run_dir / "config.json"
-    if path.exists() and json.loads(path.read_text()) != json.loads(json.dumps(asdict(config))):
+    want = json.loads(json.dumps(asdict(config)))
+    defaults = json.loads(json.dumps({f.name: f.default for f in fields(config) if f.default is not MISSING}))
+    stored = json.loads(path.read_text()) if path.exists() else want
+    stored.update({k: v for k, v in want.items() if k not in stored and k in defaults and v == defaults[k]})
+    if stored != want:
         raise ConfigError(
             f"run {name!r} exists with a different configuration ({path}); "
             "use another --name or the same options to resume"

@@ -3,6 +3,8 @@
 The remotes are those of ``nsl.share`` (the Hugging Face Hub, or any fsspec
 URL such as ``s3://bucket/prefix`` or ``file:///path``).  Every file is checked
 against the published sha256 digests before anything is placed or registered.
+:func:`checkpoint_folder` finds a checkpoint by folder, catalog reference or
+remote (what ``nsl.load_policy`` loads); a remote one is pulled into the cache.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["Pulled", "Pushed", "pull", "push"]
+__all__ = ["Pulled", "Pushed", "checkpoint_folder", "fetch_checkpoint", "pull", "push"]
 
 
 @dataclass(frozen=True)
@@ -152,6 +154,7 @@ def _place_dataset(cat, pulled, as_name: str | None) -> str:
     from nsl.datasets import api
     from nsl.datasets.versions import hash_of
     from nsl.errors import ConfigError, CorruptDataError
+    from nsl.locks import dataset_lock
 
     from .refs import register_dataset
 
@@ -165,16 +168,17 @@ def _place_dataset(cat, pulled, as_name: str | None) -> str:
     staged = api.DatasetVersion(name, pulled.version, pulled.folder)
     staged.episodes  # noqa: B018  # the metadata must agree with info.json before anything is placed
     target = api.dataset_root(name) / api.layout.VERSION_DIR.format(version=pulled.version)
-    if target.exists():
-        here = api.open_version(f"{name}@v{pulled.version}")
-        if here.hash != m["hash"]:
-            raise ConfigError(
-                f"dataset {name}@v{pulled.version} already exists here with hash {here.hash}, the "
-                f"pulled one is {m['hash']}; pull it under another name with --as NAME"
-            )
-    else:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        os.rename(pulled.folder, target)
+    with dataset_lock(name):  # a collection of the same name cannot publish this version meanwhile
+        if target.exists():
+            here = api.open_version(f"{name}@v{pulled.version}")
+            if here.hash != m["hash"]:
+                raise ConfigError(
+                    f"dataset {name}@v{pulled.version} already exists here with hash {here.hash}, the "
+                    f"pulled one is {m['hash']}; pull it under another name with --as NAME"
+                )
+        else:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            os.rename(pulled.folder, target)
     version = api.open_version(f"{name}@v{pulled.version}")
     register_dataset(cat, version)
     record_origin(
@@ -189,14 +193,62 @@ def _place_dataset(cat, pulled, as_name: str | None) -> str:
     return f"data:{version.ref} ({version.hash})"
 
 
-def _place_checkpoint(cat, pulled, as_name: str | None) -> str:
+def checkpoint_folder(source) -> Path:
+    """The folder of a checkpoint named by ``source``: a catalog reference (``ckpt:NAME[@STEP|@best|@TAG]``,
+    ``base``), a checkpoint folder, or a shared checkpoint (``hf://OWNER/NAME``, a bare Hub repo id
+    ``OWNER/NAME``, or an fsspec URL such as ``s3://bucket/prefix``; ``@REVISION`` optional), which is pulled
+    and verified into the workspace's cache (:func:`fetch_checkpoint`).
+    """
+    import re
+
+    from nsl.catalog import Catalog
+    from nsl.errors import UnknownReferenceError
+
+    from .refs import pinned, resolve_init
+
+    text = str(source).strip()
+    if text.startswith("ckpt:") or text == "base":
+        entry = pinned(text)
+        if entry is None:
+            with Catalog() as cat:
+                entry = resolve_init(cat, text)
+        return Path(entry.path)
+    folder = Path(text).expanduser()
+    if folder.is_dir():
+        return folder
+    hub_repo = re.fullmatch(r"[A-Za-z0-9][\w.-]*/[A-Za-z0-9][\w.-]*(@[\w.-]+)?", text)
+    if "://" in text or hub_repo:
+        return fetch_checkpoint(text if "://" in text else "hf://" + text)
+    raise UnknownReferenceError(
+        f"checkpoint {text!r} is neither a folder, a catalog reference (ckpt:NAME) nor a shared one "
+        "(OWNER/NAME on the Hub, hf://OWNER/NAME, s3://...)"
+    )
+
+
+def fetch_checkpoint(src: str) -> Path:
+    """The folder of the checkpoint shared at ``src`` (a Hub repo or fsspec URL, ``@REVISION`` optional), pulled
+    and verified into the workspace's cache, not catalogued (as ``from_pretrained`` caches a Hub model).
+
+    A second call re-verifies the cached files and downloads only what changed.
+    """
     from nsl import workspace
-    from nsl.catalog import DataUse, folder_checkpoint_id, record_origin
-    from nsl.errors import ConfigError, CorruptDataError, UnknownReferenceError
+    from nsl.errors import ConfigError
+    from nsl.share import pull as fetch
+
+    pulled = fetch(src, workspace.cache_dir() / "policies")
+    if pulled.kind != "checkpoint":
+        raise ConfigError(f"{pulled.url} holds a dataset version, not a checkpoint; `nsl pull {src}` brings it in")
+    _verified_checkpoint_id(pulled)
+    return pulled.folder
+
+
+def _verified_checkpoint_id(pulled) -> str:
+    """The pulled checkpoint's content id, checked against its manifest's, and its config and weights loaded."""
+    from nsl.catalog import folder_checkpoint_id
+    from nsl.errors import CorruptDataError
     from nsl.learners import load_checkpoint
 
-    m = pulled.manifest
-    ck, lineage = m["checkpoint"], list(m.get("lineage") or [])
+    ck = pulled.manifest["checkpoint"]
     cid = folder_checkpoint_id(pulled.folder)
     if cid != ck.get("id"):
         raise CorruptDataError(
@@ -204,6 +256,17 @@ def _place_checkpoint(cat, pulled, as_name: str | None) -> str:
             f"{str(ck.get('id'))[:12]}; the remote is inconsistent, ask for it to be pushed again"
         )
     load_checkpoint(pulled.folder)  # its config and weights must load before it is registered
+    return cid
+
+
+def _place_checkpoint(cat, pulled, as_name: str | None) -> str:
+    from nsl import workspace
+    from nsl.catalog import DataUse, record_origin
+    from nsl.errors import ConfigError, UnknownReferenceError
+
+    m = pulled.manifest
+    ck, lineage = m["checkpoint"], list(m.get("lineage") or [])
+    cid = _verified_checkpoint_id(pulled)
     origin = {
         "hash": cid,
         "url": pulled.url,

@@ -164,8 +164,12 @@ def train(
     source: str = "early stopping",
     quiet: bool = False,
     register: bool = True,
+    wait: bool = False,
 ) -> TrainResult:
     """Train (or resume) run ``options.name`` and catalogue its checkpoints.
+
+    One process writes a run at a time: while another holds the run's writer lock this raises LockedError
+    naming it, or with ``wait`` waits for it and then resumes (or finds finished) what it wrote.
 
     ``record`` adds fields to the run's ``command.json`` (``argv`` replaces
     the process's).  ``offline`` holds out the target's last episodes and
@@ -177,6 +181,25 @@ def train(
     catalog: the result's ``made`` goes to :func:`register_training` later
     (a study unit on a cluster node, registered by its driver).
     """
+    from nsl.locks import run_lock
+
+    if not options.name:
+        raise ConfigError("train needs a name for its checkpoint; give --name NAME")
+    with run_lock(options.name, wait=wait):
+        return _train(options, progress, record, offline, stop, source, quiet, register)
+
+
+def _train(
+    options: TrainOptions,
+    progress: bool,
+    record: Mapping[str, Any] | None,
+    offline: bool | None,
+    stop: bool,
+    source: str,
+    quiet: bool,
+    register: bool,
+) -> TrainResult:
+    """:func:`train` under the run's writer lock."""
     from nsl import code_version, workspace
     from nsl.catalog import Catalog
     from nsl.datasets import api

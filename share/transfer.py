@@ -46,7 +46,6 @@ SHARE_VERSION = 1
 LEROBOT_TAG = "v3.0"  # LeRobotDataset looks up this codebase-version tag on the Hub
 VERSION_TAG = re.compile(r"v(\d+)")
 CHECKPOINT_FILES = ("model.safetensors", "config.json")
-_BLOCK = 1 << 20
 
 
 @dataclass
@@ -76,11 +75,8 @@ class Pulled:
 
 # ------------------------------------------------------------------ hashes
 def sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
     with open(path, "rb") as f:
-        while block := f.read(_BLOCK):
-            h.update(block)
-    return h.hexdigest()
+        return hashlib.file_digest(f, "sha256").hexdigest()
 
 
 def file_table(root: Path, rels: tuple[str, ...] | list[str]) -> dict[str, dict[str, Any]]:

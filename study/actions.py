@@ -282,7 +282,7 @@ def _collect(unit: Unit, workers: int, progress: bool, register: bool = True) ->
             data=p["dataset"],
             workers=workers,
             seed=p["seed"],
-            batch_size=p["batch"],
+            num_envs=p["batch"],
             image_size=IMAGE_SIZE,
             episodes_per_file=EPISODES_PER_FILE,
             epsilon=p["epsilon"],
@@ -386,7 +386,7 @@ def _evaluate(unit: Unit, workers: int, progress: bool, register: bool = True) -
     p = unit.params
     result = evaluate(
         [p["checkpoint_ref"]],
-        EvaluateOptions(shift=p["shift"], episodes=p["episodes"], seed=p["seed"], workers=workers, batch_size=8),
+        EvaluateOptions(shift=p["shift"], episodes=p["episodes"], seed=p["seed"], workers=workers, num_envs=8),
         progress=progress,
         source="study",
         cluster="local",

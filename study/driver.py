@@ -7,17 +7,20 @@ A study lives in ``$NSL_HOME/studies/NAME/``::
     status.json    the scheduler's journal: each unit's state and seconds
     records.json   the raw numbers the report is computed from
     report.md      tables, findings (a)-(e), and the PNG plots beside it
+
+Beside it, ``studies/.NAME.lock`` is the writer lock of the process running it (:mod:`nsl.locks`;
+``.NAME.lock.json`` names that process).
 """
 
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Any
 
 from nsl import code_version, workspace
 from nsl.errors import ConfigError, UnknownReferenceError
+from nsl.locks import writer_lock
 
 from . import actions
 from .plan import Plan, load_plan, parse_plan
@@ -33,7 +36,7 @@ from .report import (
     plot_weight_change,
     render,
 )
-from .scheduler import STATUS_FILE, live_status, pid_alive, read_status, run_graph
+from .scheduler import STATUS_FILE, live_status, read_status, run_graph
 from .units import build_units, order, unit_graph
 
 PLAN_FILE = "plan.json"
@@ -59,15 +62,19 @@ def prepare(plan_ref: str, name: str | None = None):
     name = name or plan.name
     if not name.replace("-", "").replace("_", "").isalnum():
         raise ConfigError(f"--name {name!r} must use letters, digits, '-' and '_'")
+    _check_saved_plan(name, plan)
+    base = actions.base_sources(plan)
+    units = build_units(plan, name, base)
+    return plan, name, units, unit_graph(units)
+
+
+def _check_saved_plan(name: str, plan) -> None:
     saved = study_dir(name) / PLAN_FILE
     if saved.is_file() and not _same_plan(json.loads(saved.read_text()), plan):
         raise ConfigError(
             f"study {name!r} exists with a different plan ({saved}); run it with the same plan to "
             "resume, or choose another --name"
         )
-    base = actions.base_sources(plan)
-    units = build_units(plan, name, base)
-    return plan, name, units, unit_graph(units)
 
 
 def estimate_study(plan_ref: str, name: str | None = None, slots: int | None = None):
@@ -107,31 +114,36 @@ def run_study(
     cluster: str | None = None,
     unit_cpus: float = 1.0,
     store: str | None = None,
+    wait: bool = False,
 ) -> dict[str, Any]:
     """Run (or resume) a study; writes its report at the end.  Returns the final status record.
 
     ``cluster`` (``--cluster``; None: ``$NSL_CLUSTER``, else local) runs every unit as a Ray task holding
     ``unit_cpus`` CPUs instead of ``workers`` local processes; the numbers are the same.  ``store`` (``--store``,
     an fsspec URL; None: ``$NSL_STORE``, else a shared ``NSL_HOME``) moves the units' folders through it.
+    One process runs a study at a time (its folder's writer lock, from the plan check to the report): while
+    another holds it this raises LockedError naming it, or with ``wait`` waits for it, then resumes.
     """
     if workers < 1:
         raise ConfigError(f"--workers {workers} must be at least 1")
-    plan, name, units, graph = prepare(plan_ref, name)
-    status = run_planned(
-        study_dir(name),
-        "study",
-        name,
-        plan,
-        units,
-        graph,
-        workers=workers,
-        progress=progress,
-        cluster=cluster,
-        unit_cpus=unit_cpus,
-        store=store,
-        bases=(plan.base,),
-    )
-    write_study_report(name)
+    plan, name, units, graph = prepare(plan_ref, name)  # checks everything, writes nothing
+    with writer_lock(study_dir(name), f"study {name!r}", wait=wait):
+        _check_saved_plan(name, plan)  # again: a run that held the lock may have saved another plan
+        status = run_planned(
+            study_dir(name),
+            "study",
+            name,
+            plan,
+            units,
+            graph,
+            workers=workers,
+            progress=progress,
+            cluster=cluster,
+            unit_cpus=unit_cpus,
+            store=store,
+            bases=(plan.base,),
+        )
+        write_study_report(name)
     return status
 
 
@@ -149,30 +161,34 @@ def run_planned(
     unit_cpus: float = 1.0,
     store: str | None = None,
     bases: tuple[str, ...] = (),
+    wait: bool = False,
 ) -> dict[str, Any]:
-    """Run a planned unit graph in ``folder`` (a study's or a transfer's, ``key`` says which): refuse while
-    another live process runs it, save the plan and the unit list, then run (or resume) the graph.
+    """Run a planned unit graph in ``folder`` (a study's or a transfer's, ``key`` says which): take the folder's
+    writer lock (refuse while another process holds it, or ``wait`` for it), save the plan and the unit list,
+    then run (or resume) the graph.
 
     Units never open the catalog: this process resolves the checkpoints each reads and registers what each made,
     on a cluster as on this machine.  ``bases`` are resolved here first (the shipped base registers itself).
     """
-    from functools import partial
-
     from nsl.cluster import open_executor, parse_cluster
     from nsl.share.store import parse_store
-
-    from .estimate import unit_seconds
 
     if unit_cpus <= 0:
         raise ConfigError(f"--unit-cpus {unit_cpus} must be positive")
     spec, store = parse_cluster(cluster), parse_store(store)
     executor = open_executor(spec, store=store)  # without Ray, --cluster ray stops here, before anything is written
-    running = read_status(folder / STATUS_FILE)
-    if running.get("state") == "running" and running.get("pid") != os.getpid() and pid_alive(running.get("pid")):
-        raise ConfigError(
-            f"{key} {name!r} is being run by process {running['pid']}; wait for it, or stop it and "
-            "run the same command again to resume"
+    with writer_lock(folder, f"{key} {name!r}", wait=wait):  # reentrant: run_study holds it already
+        return _run_locked(
+            folder, key, name, plan, units, graph, executor, spec, store, workers, progress, unit_cpus, bases
         )
+
+
+def _run_locked(folder, key, name, plan, units, graph, executor, spec, store, workers, progress, unit_cpus, bases):
+    """:func:`run_planned` under the folder's writer lock (the status file's pid is for information only)."""
+    from functools import partial
+
+    from .estimate import unit_seconds
+
     folder.mkdir(parents=True, exist_ok=True)
     workspace.atomic_write_json(folder / PLAN_FILE, plan.to_dict())
     workspace.atomic_write_json(

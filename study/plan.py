@@ -27,7 +27,7 @@ Sections (see ``study/plans/small.toml`` for a commented example)::
 from __future__ import annotations
 
 import tomllib
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -257,7 +257,7 @@ def parse_plan(data: dict[str, Any], source: str = "", default_name: str = "stud
     baselines = sections["finetune"].baselines if "finetune" in sections else plan.finetune.baselines
     if "supervised" not in sections and set(baselines) & set(SUPERVISED_BASELINES):
         sections["supervised"] = Supervised()
-    plan = Plan(**{**{f.name: getattr(plan, f.name) for f in fields(Plan)}, **sections, "source": source})
+    plan = replace(plan, **sections, source=source)
     validate(plan)
     return plan
 

@@ -5,13 +5,15 @@ evaluations, curve files) into ``records.json``: plain counts, no derived
 numbers.  Everything else is a pure function of those records (and so can be
 tested on hand-made ones): the tables, the plots and :func:`findings`.
 
-Intervals: a success rate gets its 95% Wilson interval; a difference of two
-rates gets Newcombe's score interval for paired outcomes when both cells
-recorded their episodes' outcomes on the same scenes (the catalog keeps them;
-a cell pooled over k training seeds is paired with the other cell's scenes
-repeated k times), and Newcombe's hybrid interval for independent rates
-otherwise (conservative for paired scenes).  A cell with several training
-seeds shows the seed mean with its t interval and pools their episodes.
+Intervals, all from ``nsl.stats``: a success rate gets its 95% Wilson
+interval over its scenes; a cell pooled over k training seeds on the same
+scenes counts each scene once (the seeds' mean rate on its N scenes).  A
+difference of two cells recorded on the same scenes gets Newcombe's paired
+interval when each is one run, and the hierarchical paired bootstrap
+(``nsl.stats.hierarchical_gain``: seeds resampled, then scenes, each scene
+kept with its pair) when either pools several seeds; that interval covers
+seeds and scenes, with the one target collection held fixed.  Cells without
+per-scene outcomes fall back to Newcombe's interval for independent rates.
 """
 
 from __future__ import annotations
@@ -29,6 +31,16 @@ from nsl.eval import (
     Rate,
     choose_steps,
     continual_metrics,
+)
+from nsl.stats import (
+    compare_intervals,
+    hierarchical_gain,
+    hierarchical_rate,
+    mean_gain_of_rates,
+    newcombe_interval,
+    newcombe_paired_interval,
+    paired_counts,
+    t_interval,
     wilson_interval,
 )
 
@@ -49,14 +61,32 @@ class Count:
     successes: int
     episodes: int
     outcomes: str | None = None  # "1"/"0" per episode in scene order, when the evaluation recorded them
+    runs: int = 1  # training seeds (or rounds) pooled, each on the same scenes: episodes = runs x scenes
 
     @property
     def rate(self) -> float:
         return self.successes / self.episodes
 
     @property
+    def scenes(self) -> int:
+        return self.episodes // self.runs
+
+    @property
     def ci(self) -> tuple[float, float]:
-        return wilson_interval(self.successes, self.episodes)
+        """Wilson's interval over the distinct scenes: a pooled cell's mean rate on its N scenes, each counted once
+        (it covers the scenes, not the seeds)."""
+        return wilson_interval(self.rate * self.scenes, self.scenes)  # type: ignore[arg-type]
+
+    def matrix(self, scenes: int | None = None):
+        """The outcomes as a (runs, scenes) 0/1 array (``scenes`` infers the runs of an old record), or None."""
+        import numpy as np
+
+        if self.outcomes is None:
+            return None
+        n = scenes or self.scenes
+        if n <= 0 or len(self.outcomes) % n:
+            return None
+        return np.frombuffer(self.outcomes.encode(), dtype=np.uint8).reshape(-1, n).astype(np.int8) - ord("0")
 
     def pct(self) -> str:
         lo, hi = self.ci
@@ -64,11 +94,13 @@ class Count:
 
     def to_dict(self) -> dict:
         out: dict[str, Any] = {"successes": self.successes, "episodes": self.episodes}
+        if self.runs > 1:
+            out["runs"] = self.runs
         return out if self.outcomes is None else {**out, "outcomes": self.outcomes}
 
 
 def count(d: Mapping | None) -> Count | None:
-    return None if not d else Count(int(d["successes"]), int(d["episodes"]), d.get("outcomes"))
+    return None if not d else Count(int(d["successes"]), int(d["episodes"]), d.get("outcomes"), int(d.get("runs", 1)))
 
 
 def pooled(items: Sequence[Mapping | None]) -> Count | None:
@@ -77,19 +109,21 @@ def pooled(items: Sequence[Mapping | None]) -> Count | None:
     if not cs or any(c is None for c in cs):
         return None
     outcomes = None if any(c.outcomes is None for c in cs) else "".join(c.outcomes for c in cs)
-    return Count(sum(c.successes for c in cs), sum(c.episodes for c in cs), outcomes)
+    runs = sum(c.runs for c in cs)
+    same = len({c.scenes for c in cs}) == 1  # every seed on the same scenes: each scene counts once
+    return Count(sum(c.successes for c in cs), sum(c.episodes for c in cs), outcomes, runs if same else 1)
 
 
-def _paired(a: Count, b: Count) -> tuple[str, str] | None:
-    """The two cells' outcomes aligned scene by scene, or None when they cannot be paired."""
+def _paired(a: Count, b: Count):
+    """The two cells' outcomes as (runs, scenes) arrays on the same scenes, or None when they cannot be paired.
+    An old record without ``runs`` whose outcomes are a multiple of the other cell's is read as that many runs."""
     if a.outcomes is None or b.outcomes is None:
         return None
-    x, y = a.outcomes, b.outcomes
-    if len(x) % len(y) == 0:
-        y = y * (len(x) // len(y))  # a pooled cell's seeds each met the other cell's scenes
-    elif len(y) % len(x) == 0:
-        x = x * (len(y) // len(x))
-    return (x, y) if len(x) == len(y) else None
+    n = min(a.scenes, b.scenes)
+    if a.scenes != b.scenes and (max(a.scenes, b.scenes) % n or (a.runs > 1 and b.runs > 1)):
+        return None
+    x, y = a.matrix(n), b.matrix(n)
+    return None if x is None or y is None else (x, y)
 
 
 def seed_mean(items: Sequence[Mapping | None]) -> tuple[float, float] | None:
@@ -97,12 +131,7 @@ def seed_mean(items: Sequence[Mapping | None]) -> tuple[float, float] | None:
     cs = [count(d) for d in items]
     if len(cs) < 2 or any(c is None for c in cs):
         return None
-    from scipy import stats
-
-    rates = [c.rate for c in cs]
-    mean = sum(rates) / len(rates)
-    sd = math.sqrt(sum((r - mean) ** 2 for r in rates) / (len(rates) - 1))
-    return mean, float(stats.t.ppf(0.975, len(rates) - 1)) * sd / math.sqrt(len(rates))
+    return t_interval([c.rate for c in cs])  # type: ignore[union-attr]
 
 
 def mean_gain_over_seeds(records: Mapping[str, Any], tier: str) -> tuple[float, float, int] | None:
@@ -120,45 +149,51 @@ def mean_gain_over_seeds(records: Mapping[str, Any], tier: str) -> tuple[float, 
     k = min(len(g) for g in per_seed) if per_seed else 0
     if k < 2:
         return None
-    from scipy import stats
+    got = t_interval([sum(g[i] for g in per_seed) / len(per_seed) for i in range(k)])
+    return None if got is None else (got[0], got[1], k)
 
-    means = [sum(g[i] for g in per_seed) / len(per_seed) for i in range(k)]
-    m = sum(means) / k
-    sd = math.sqrt(sum((x - m) ** 2 for x in means) / (k - 1))
-    return m, float(stats.t.ppf(0.975, k - 1)) * sd / math.sqrt(k), k
+
+def rate_interval(c: Count) -> tuple[float, float]:
+    """A cell's 95% interval: over seeds and scenes (hierarchical bootstrap) for several seeds with per-scene
+    outcomes, else Wilson's over its distinct scenes."""
+    x = c.matrix() if c.runs > 1 else None
+    if x is None:
+        return c.ci
+    got = hierarchical_rate(x[None])
+    return got.low, got.high
 
 
 def seeds_cell(items: Sequence[Mapping | None]) -> str:
-    """A cell over training seeds: the seed mean with its t interval, then the pooled Wilson interval."""
+    """A cell over training seeds: the seeds' mean rate with its 95% interval over seeds and scenes (each scene
+    counted once); without per-scene outcomes the seed mean ± its t interval (seeds only)."""
     c = pooled(items)
     if c is None:
         return "-"
+    if c.runs > 1 and c.outcomes is not None:
+        lo, hi = rate_interval(c)
+        return f"{100 * c.rate:.0f}% [{100 * lo:.0f}-{100 * hi:.0f}]"
     m = seed_mean(items)
     if m is None:
         return c.pct()
-    lo, hi = c.ci
-    return f"{100 * m[0]:.0f}% ±{100 * m[1]:.0f} (pooled [{100 * lo:.0f}-{100 * hi:.0f}])"
+    return f"{100 * m[0]:.0f}% ±{100 * m[1]:.0f} (seeds only)"
 
 
 def diff_interval(a: Count, b: Count) -> tuple[float, float, float]:
-    """(a - b, low, high): Newcombe's interval for paired outcomes when both cells have them on the same
-    scenes, else his hybrid score interval (method 10) for independent proportions."""
+    """(a - b, low, high) on the same scenes: Newcombe's paired interval when each cell is one run; the
+    hierarchical paired bootstrap over seeds and scenes when either pools several runs (each scene once, runs
+    paired in order when both pool the same number, every run against the other's one otherwise); Newcombe's
+    interval for independent rates over the distinct scenes when the outcomes cannot be paired."""
     pair = _paired(a, b)
     if pair is not None:
-        from nsl.eval.paired import paired_difference_interval
-
         x, y = pair
-        both = sum(1 for i, j in zip(x, y) if i == j == "1")
-        only_a, only_b = sum(1 for i, j in zip(x, y) if i > j), sum(1 for i, j in zip(x, y) if i < j)
-        lo, hi = paired_difference_interval(both, only_a, only_b, len(x) - both - only_a - only_b)
-        return a.rate - b.rate, lo, hi
-    (l1, u1), (l2, u2) = a.ci, b.ci
-    d = a.rate - b.rate
-    return (
-        d,
-        d - math.sqrt((a.rate - l1) ** 2 + (u2 - b.rate) ** 2),
-        d + math.sqrt((u1 - a.rate) ** 2 + (b.rate - l2) ** 2),
-    )
+        if len(x) == len(y) == 1:
+            lo, hi = newcombe_paired_interval(*paired_counts(x[0], y[0]))
+            return a.rate - b.rate, lo, hi
+        if len(x) == len(y) or 1 in (len(x), len(y)):
+            got = hierarchical_gain((x - y)[None], None)
+            return got.mean, got.low, got.high
+    lo, hi = newcombe_interval(a.rate * a.scenes, a.scenes, b.rate * b.scenes, b.scenes)  # type: ignore[arg-type]
+    return a.rate - b.rate, lo, hi
 
 
 def points(a: Count, b: Count) -> str:
@@ -486,7 +521,7 @@ def continual_table(records: Mapping[str, Any]) -> str:
     tasks = c["tasks"]
     lines = [
         "| stage task | continual (own stage) | vs base policy | single-step from base | vs single | final | "
-        "study: final | study: vs single |",
+        "study: own stage, each on its own task (Fig. 5.5) | study: vs its single (best Table 5.2 tier; 800 tier) |",
         "|---|---|---|---|---|---|---|---|",
     ]
     T = len(m.stages) - 1
@@ -509,7 +544,7 @@ def continual_table(records: Mapping[str, Any]) -> str:
             "-" if own is None or single is None else points(own, single),
             final_cell or "-",
             f"{ref.CONTINUAL.get(study_task, '-')}%",
-            f"{ref.CONTINUAL_VS_SINGLE.get(study_task, 0):+d}",
+            _study_vs_single(study_task),
         ]
         lines.append("| " + " | ".join(cols) + " |")
     b0, bT = count(cells[0][0]), count(cells[T][0])
@@ -519,6 +554,17 @@ def continual_table(records: Mapping[str, Any]) -> str:
             f"no forgetting found | - |"
         )
     return "\n".join(lines)
+
+
+def _study_vs_single(task: str) -> str:
+    """The source's continual stage against its single-step baseline, the best tier of its Table 5.2, and against
+    the 800 tier: ``-5 (vs 93% at 25); -19 vs 800's 69%``."""
+    if task not in ref.CONTINUAL or task not in ref.SINGLE_BEST:
+        return "-"
+    best, tier = ref.SINGLE_BEST[task]
+    top = ref.FINETUNE[task][ref.TOP]
+    own = ref.CONTINUAL[task]
+    return f"{own - best:+d} (vs {best}% at {tier}); {own - top:+d} vs {ref.TOP}'s {top}%"
 
 
 def cross_shift_table(records: Mapping[str, Any]) -> str:
@@ -604,7 +650,8 @@ def curves_table(records: Mapping[str, Any]) -> str:
 
 
 def mean_curve(by_seed: Mapping[str, Sequence[Mapping] | None], which: str) -> list[tuple[int, Count]]:
-    """(step, pooled count over seeds) at the steps every seed evaluated."""
+    """(step, pooled count over seeds) at the steps every seed evaluated; the seeds met the same scenes, so its
+    interval counts each scene once (it covers the scenes, not the seeds: the curves have no per-scene outcomes)."""
     per_seed = []
     for rows in by_seed.values():
         d = {}
@@ -616,7 +663,7 @@ def mean_curve(by_seed: Mapping[str, Sequence[Mapping] | None], which: str) -> l
     if not per_seed or any(not d for d in per_seed):
         return []
     steps = sorted(set.intersection(*(set(d) for d in per_seed)))
-    return [(s, Count(sum(d[s].successes for d in per_seed), sum(d[s].episodes for d in per_seed))) for s in steps]
+    return [(s, pooled([d[s].to_dict() for d in per_seed])) for s in steps]  # type: ignore[misc]
 
 
 def early_stop_choices(records: Mapping[str, Any]) -> dict[str, Any]:
@@ -668,6 +715,8 @@ class Finding:
 
     @property
     def verdict(self) -> str:
+        if self.holds is None and "not resolvable" in self.ours:
+            return "not resolvable"
         return {True: "holds", False: "fails", None: "not measured"}[self.holds]
 
 
@@ -783,11 +832,21 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
         if base is not None and ft.rate >= base.rate:
             reached.append(shift)
     n = len(records["finetune"])
+    verdict_b = ""
     if len(gains) < n:
         holds_b = None
     else:
-        share = len(ref.STUDY_REACHED_BASE) / len(ref.CHALLENGE)
-        holds_b = sum(gains) / n >= ref.STUDY_MEAN_GAIN_800 / 100 and len(reached) >= share * n
+        shift_gains = [diff_interval(pooled(r["tiers"][top]), count(bp.get(s))) for s, r in records["finetune"].items()]
+        ours_b = mean_of_gains(shift_gains)  # type: ignore[arg-type]
+        source_b = study_gain_interval(plan["shifts"])
+        verdict_b = compare_intervals(ours_b, source_b)
+        holds_b = {"holds": True, "fails": False}.get(verdict_b)
+        verdict_b = (
+            f"; against the study's binomial interval (N={ref.STUDY_N} per cell) "
+            f"{100 * source_b[0]:+.1f} [{100 * source_b[1]:+.1f}, {100 * source_b[2]:+.1f}], ours "
+            f"{100 * ours_b[0]:+.1f} [{100 * ours_b[1]:+.1f}, {100 * ours_b[2]:+.1f}] (shifts combined; each "
+            f"shift's interval covers its training runs and scenes, one collection fixed): {verdict_b}"
+        )
     out.append(
         Finding(
             "b",
@@ -800,6 +859,7 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
                 "reaches the base policy's "
                 f"base-task success on {len(reached)} of {n}"
                 + (f" ({', '.join(map(_pretty, reached))})" if reached else "")
+                + verdict_b
             )
             if gains
             else "-",
@@ -837,12 +897,9 @@ def findings(records: Mapping[str, Any]) -> list[Finding]:
             ours_d = f"base task {b0.pct()} before, {bT.pct()} after the last stage: lost {points(b0, bT)} points"
             seeds = records["continual"].get("seeds")
             lost = [b0.rate - count(q[-1][0]).rate for q in seeds or [] if count(q[-1][0]) is not None]
-            if len(lost) > 1 and len(lost) == len(seeds or []):
-                from scipy import stats
-
-                mean = sum(lost) / len(lost)
-                sd = math.sqrt(sum((x - mean) ** 2 for x in lost) / (len(lost) - 1))
-                half = float(stats.t.ppf(0.975, len(lost) - 1)) * sd / math.sqrt(len(lost))
+            got = t_interval(lost) if len(lost) == len(seeds or []) else None
+            if got is not None:
+                mean, half = got
                 ours_d += (
                     f" (mean over {len(lost)} seeds {100 * mean:+.1f} [{100 * (mean - half):+.1f}, "
                     f"{100 * (mean + half):+.1f}], 95% t interval)"
@@ -951,6 +1008,23 @@ def supervised_finding(records: Mapping[str, Any], baselines: Sequence[str], top
     )
 
 
+def mean_of_gains(gains: Sequence[tuple[float, float, float]]) -> tuple[float, float, float]:
+    """(mean, low, high) of the mean of independent shifts' gains, each (mean, low, high): half-widths added in
+    quadrature (normal approximation; each shift has its own scenes and fine-tunes)."""
+    m = sum(g[0] for g in gains) / len(gains)
+    lo = math.sqrt(sum((g[0] - g[1]) ** 2 for g in gains)) / len(gains)
+    hi = math.sqrt(sum((g[2] - g[0]) ** 2 for g in gains)) / len(gains)
+    return m, m - lo, m + hi
+
+
+def study_gain_interval(shifts: Sequence[str]) -> tuple[float, float, float]:
+    """The study's mean gain at its top tier over the plan's shifts (all five when the plan names none of
+    them), with the binomial interval of its N attempts per cell."""
+    known = [ref.study_shift(s) for s in shifts if ref.study_shift(s) in ref.STUDY_GAINS] or list(ref.STUDY_GAINS)
+    cells = [(ref.FINETUNE[s][ref.TOP] / 100, ref.FINETUNE[s]["base"] / 100) for s in known]
+    return mean_gain_of_rates(cells, ref.STUDY_N)
+
+
 def study_figures(shifts: Sequence[str], table: Mapping[str, int]) -> list[tuple[str, int | None]]:
     """The study's figure for each of the plan's shifts, in the plan's order (None: the study has none)."""
     return [(s, table.get(ref.study_shift(s))) for s in shifts]
@@ -1055,13 +1129,8 @@ def findings_table(items: Sequence[Finding]) -> str:
 
 def plot_tiers(records: Mapping[str, Any], path: Path) -> Path:
     """Success against target episodes per shift (ours solid with 95% intervals, the study's dotted)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     tiers = records["plan"]["finetune"]["tiers"]
-    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    fig, ax = _subplots(figsize=(7.5, 4.5))
     for i, (shift, row) in enumerate(records["finetune"].items()):
         colour = f"C{i % 10}"
         pts = [(k, pooled(row["tiers"][str(k)])) for k in tiers]
@@ -1072,9 +1141,10 @@ def plot_tiers(records: Mapping[str, Any], path: Path) -> Path:
         if pts:
             x = [k for k, _ in pts]
             y = [100 * c.rate for _, c in pts]
+            cis = [rate_interval(c) for _, c in pts]
             err = [
-                [max(0.0, 100 * (c.rate - c.ci[0])) for _, c in pts],
-                [max(0.0, 100 * (c.ci[1] - c.rate)) for _, c in pts],
+                [max(0.0, 100 * (c.rate - ci[0])) for (_, c), ci in zip(pts, cis)],
+                [max(0.0, 100 * (ci[1] - c.rate)) for (_, c), ci in zip(pts, cis)],
             ]
             ax.errorbar(x, y, yerr=err, fmt="o-", color=colour, capsize=3, ms=4, label=_pretty(shift))
         study = ref.FINETUNE.get(ref.study_shift(shift))
@@ -1094,12 +1164,7 @@ def plot_tiers(records: Mapping[str, Any], path: Path) -> Path:
 
 def plot_curves(records: Mapping[str, Any], path: Path) -> Path:
     """Target and base-task success over gradient steps per method: seeds thin, pooled mean with 95% band."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
+    fig, axes = _subplots(1, 2, figsize=(11, 4.2), sharey=True)
     for ax, which, title in (
         (axes[0], "target", f"target: {_pretty(records['plan']['curves']['shift'])}"),
         (axes[1], "base", "base task"),
@@ -1122,7 +1187,7 @@ def plot_curves(records: Mapping[str, Any], path: Path) -> Path:
         ax.set_title(title)
         ax.set_xlabel("gradient steps")
         ax.grid(alpha=0.3)
-    axes[0].set_ylabel("success (%, pooled over seeds, 95% CI)")
+    axes[0].set_ylabel("success (%, seeds' mean; 95% CI over scenes)")
     axes[0].set_ylim(-2, 102)
     axes[0].legend(fontsize=8)
     return _save(fig, path)
@@ -1131,11 +1196,6 @@ def plot_curves(records: Mapping[str, Any], path: Path) -> Path:
 def plot_online(records: Mapping[str, Any], path: Path) -> Path:
     """Figs. 5.10 and 5.11: target success against the grasps collected, per run, with 95% bands; the base policy's
     base-task success as a line."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     o, runs = records["plan"]["online"], records["online"]
     panels = [
         (
@@ -1148,7 +1208,7 @@ def plot_online(records: Mapping[str, Any], path: Path) -> Path:
         ),
     ]
     panels = [(t, rs) for t, rs in panels if rs]
-    fig, axes = plt.subplots(1, len(panels), figsize=(5.5 * len(panels), 4.2), sharey=True, squeeze=False)
+    fig, axes = _subplots(1, len(panels), figsize=(5.5 * len(panels), 4.2), sharey=True, squeeze=False)
     base = count(records["base_policy"].get("base"))
     for ax, (title, rs) in zip(axes[0], panels):
         for i, r in enumerate(sorted(rs, key=lambda r: (r["method"], r["ratio"]))):
@@ -1174,15 +1234,10 @@ def plot_online(records: Mapping[str, Any], path: Path) -> Path:
 
 def plot_weight_change(records: Mapping[str, Any], path: Path) -> Path:
     """Fig. 5.8: per layer (trunk to head), each shift's normalised cosine distance as a bar; 1 is the base task."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     wc = records["weight_change"]
     shifts, layers = list(wc), list(next(iter(wc.values())))
     width = 0.8 / len(shifts)
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.6 * len(layers) + 2), 4.0))
+    fig, ax = _subplots(figsize=(max(6.0, 0.6 * len(layers) + 2), 4.0))
     for i, shift in enumerate(shifts):
         xs = [j + (i - (len(shifts) - 1) / 2) * width for j in range(len(layers))]
         ax.bar(xs, [wc[shift][layer] for layer in layers], width, color=f"C{i % 10}", label=_pretty(shift))
@@ -1203,6 +1258,17 @@ def plot_early_stop(records: Mapping[str, Any], path: Path) -> Path:
     return plot_curve(rows, path, choices=choices)
 
 
+def _subplots(*grid: int, figsize: tuple[float, float], **kwargs: Any):
+    """``(figure, axes)`` as ``pyplot.subplots`` gives them, on the figure's own Agg canvas: no pyplot state, and
+    the backend of whoever imported nsl (a notebook's) stays as it was."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize)
+    FigureCanvasAgg(fig)
+    return fig, fig.subplots(*grid, **kwargs)
+
+
 def _save(fig, path: Path) -> Path:
     import io
 
@@ -1211,9 +1277,6 @@ def _save(fig, path: Path) -> Path:
     buf = io.BytesIO()
     fig.tight_layout()
     fig.savefig(buf, format="png", dpi=110)
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
     atomic_write_bytes(Path(path), buf.getvalue())
     return Path(path)
 

@@ -57,27 +57,18 @@ def read_status(path: Path) -> dict[str, Any]:
         return {}  # a status file is a journal; the outputs are the truth
 
 
-def pid_alive(pid: int | None) -> bool:
-    if not pid:
-        return False
-    try:
-        os.kill(int(pid), 0)
-    except (ProcessLookupError, PermissionError, ValueError):
-        return False
-    try:  # a zombie (killed, not yet reaped) is not running
-        with open(f"/proc/{int(pid)}/stat") as f:
-            return f.read().split(") ", 1)[1][0] != "Z"
-    except (OSError, IndexError):
-        return True
-
-
 def live_status(path: Path, key: str, name: str) -> dict[str, Any]:
     """The status record at ``path`` (``{key: name, ...}``), with the 'running' units of a dead scheduler shown
-    as 'interrupted'; ``{key: name, "state": "not started"}`` before the first run."""
+    as 'interrupted'; ``{key: name, "state": "not started"}`` before the first run.
+
+    The scheduler is alive while a process holds the folder's writer lock (:mod:`nsl.locks`), which dies with it
+    even by kill -9; a pid in the record could have been reused."""
+    from nsl.locks import holder
+
     status = read_status(path)
     if not status:
         return {key: name, "state": "not started", "units": {}}
-    alive = pid_alive(status.get("pid"))
+    alive = holder(Path(path).parent) is not None
     if status.get("state") == "running" and not alive:
         status["state"] = "interrupted"
     for name, u in status.get("units", {}).items():

@@ -29,7 +29,7 @@ Sections (``study/plans/transfer-small.toml`` is a commented example)::
 
 from __future__ import annotations
 
-from dataclasses import MISSING, asdict, dataclass, fields
+from dataclasses import MISSING, asdict, dataclass, fields, replace
 from typing import Any
 
 from nsl.errors import ConfigError, UnknownReferenceError
@@ -130,9 +130,7 @@ def parse_transfer_plan(data: dict[str, Any], source: str = "", default_name: st
     top = {k: v for k, v in data.items() if k != "tasks"}
     top.setdefault("name", default_name)
     plan = _build(TransferPlan, top, "top level")
-    plan = TransferPlan(
-        **{**{f.name: getattr(plan, f.name) for f in fields(TransferPlan)}, "tasks": tasks, "source": source}
-    )
+    plan = replace(plan, tasks=tasks, source=source)
     return validate_transfer(plan)
 
 
@@ -188,7 +186,7 @@ def validate_transfer(plan: TransferPlan) -> TransferPlan:
         raise ConfigError(
             f"transfer plan auc_floor = {plan.auc_floor!r} must be in (0, 1], or left out (1 / eval_episodes)"
         )
-    return TransferPlan(**{**{f.name: getattr(plan, f.name) for f in fields(TransferPlan)}, "tasks": tuple(tasks)})
+    return replace(plan, tasks=tuple(tasks))
 
 
 def load_transfer_plan(ref: str) -> TransferPlan:

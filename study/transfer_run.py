@@ -19,6 +19,7 @@ from typing import Any
 
 from nsl import code_version, workspace
 from nsl.errors import ConfigError, UnknownReferenceError
+from nsl.locks import writer_lock
 
 from . import actions
 from .driver import PLAN_FILE, run_planned
@@ -83,17 +84,21 @@ def _ft_lr(base_ref: str) -> float:
     return FINE_TUNE_LR_FACTOR * float(json.loads((Path(entry.path) / "config.json").read_text())["training"]["lr"])
 
 
-def prepare_transfer(plan_ref: str, name: str | None = None):
-    """Load and check everything and build the unit graph; writes nothing."""
-    plan = load_transfer_plan(plan_ref)
-    if name:
-        plan = parse_transfer_plan({**plan.to_dict(), "name": name}, plan.source)
+def _check_saved_plan(plan: TransferPlan) -> None:
     saved = transfer_dir(plan.name) / PLAN_FILE
     if saved.is_file() and json.loads(saved.read_text()) != json.loads(json.dumps(plan.to_dict())):
         raise ConfigError(
             f"transfer {plan.name!r} exists with a different plan ({saved}); run it with the same plan "
             "to resume, or choose another --name"
         )
+
+
+def prepare_transfer(plan_ref: str, name: str | None = None):
+    """Load and check everything and build the unit graph; writes nothing."""
+    plan = load_transfer_plan(plan_ref)
+    if name:
+        plan = parse_transfer_plan({**plan.to_dict(), "name": name}, plan.source)
+    _check_saved_plan(plan)
     study = _study_plan(plan)
     base = actions.base_sources(study)
     _check_workspace(plan)
@@ -118,27 +123,30 @@ def run_transfer(
     cluster: str | None = None,
     unit_cpus: float = 1.0,
     store: str | None = None,
+    wait: bool = False,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Run (or resume) a transfer, then write its matrix and report: (final status record, report summary).
 
-    ``cluster``, ``unit_cpus`` and ``store`` as for :func:`nsl.study.driver.run_study`."""
+    ``cluster``, ``unit_cpus``, ``store`` and ``wait`` as for :func:`nsl.study.driver.run_study`."""
     if workers < 1:
         raise ConfigError(f"--workers {workers} must be at least 1")
-    plan, units, graph = prepare_transfer(plan_ref, name)
-    status = run_planned(
-        transfer_dir(plan.name),
-        "transfer",
-        plan.name,
-        plan,
-        units,
-        graph,
-        workers=workers,
-        progress=progress,
-        cluster=cluster,
-        unit_cpus=unit_cpus,
-        store=store,
-    )
-    return status, write_transfer_report(plan.name)
+    plan, units, graph = prepare_transfer(plan_ref, name)  # checks everything, writes nothing
+    with writer_lock(transfer_dir(plan.name), f"transfer {plan.name!r}", wait=wait):
+        _check_saved_plan(plan)  # again: a run that held the lock may have saved another plan
+        status = run_planned(
+            transfer_dir(plan.name),
+            "transfer",
+            plan.name,
+            plan,
+            units,
+            graph,
+            workers=workers,
+            progress=progress,
+            cluster=cluster,
+            unit_cpus=unit_cpus,
+            store=store,
+        )
+        return status, write_transfer_report(plan.name)
 
 
 def load_saved(name: str) -> TransferPlan:

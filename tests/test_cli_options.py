@@ -13,6 +13,7 @@ from nsl.commands._options import rename_old_options
 # dest -> the one option string that may carry it
 CANONICAL = {
     "batch_size": "--batch-size",
+    "num_envs": "--num-envs",
     "workers": "--workers",
     "seed": "--seed",
     "json": "--json",
@@ -171,14 +172,46 @@ def test_renamed_options_still_work_and_say_the_new_name(capsys):
             ["collect", "--shift", "base", "--episodes", "2", "--policy", "random", "--dataset", "d", "--batch=4"]
         )
     )
-    assert args.data == "d" and args.batch_size == 4
+    assert args.data == "d" and args.num_envs == 4
     err = capsys.readouterr().err
-    assert "--dataset is now --data" in err and "--batch is now --batch-size" in err
-    assert parser.parse_args(["eval"]).batch_size == 8
+    assert "--dataset is now --data" in err and "--batch is now --num-envs in nsl collect" in err
+    assert parser.parse_args(["eval"]).num_envs == 8
+    args = parser.parse_args(rename_old_options(["train", "--data", "d", "--name", "n", "--batch=16"]))
+    assert args.batch_size == 16 and "--batch is now --batch-size;" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["collect", "eval", "online"])
+def test_num_envs_and_the_old_batch_size_with_its_note(command, capsys):
+    """Environments per worker are --num-envs; --batch-size keeps working there for one release, with a note."""
+    required = {
+        "collect": ["--shift", "base", "--episodes", "2", "--policy", "random", "--data", "d"],
+        "eval": [],
+        "online": ["--shift", "base"],
+    }[command]
+    parser = build_parser()
+    assert parser.parse_args([command, *required, "--num-envs", "3"]).num_envs == 3
+    assert capsys.readouterr().err == ""
+    for old in (["--batch-size", "5"], ["--batch-size=5"]):
+        assert parser.parse_args(rename_old_options([command, *required, *old])).num_envs == 5
+        err = capsys.readouterr().err
+        assert err == f"nsl: --batch-size is now --num-envs in nsl {command}; the old name will go away\n"
+    # train keeps --batch-size (transitions per gradient step), with no note
+    args = parser.parse_args(rename_old_options(["train", "--data", "d", "--name", "n", "--batch-size", "16"]))
+    assert args.batch_size == 16 and capsys.readouterr().err == ""
+
+
+def test_the_python_api_takes_num_envs_and_the_old_batch_size_with_a_warning():
+    import nsl
+    from nsl.api import _settle
+
+    assert _settle(nsl.EvaluateOptions, None, {"num_envs": 2}, "evaluate").num_envs == 2
+    with pytest.warns(FutureWarning, match=r"nsl.evaluate\(batch_size=...\) is now num_envs="):
+        assert _settle(nsl.EvaluateOptions, None, {"batch_size": 3}, "evaluate").num_envs == 3
+    assert _settle(nsl.TrainOptions, None, {"batch_size": 32, "data": ("d",)}, "train").batch_size == 32
 
 
 def test_help_shows_defaults(capsys):
     with pytest.raises(SystemExit):
         build_parser().parse_args(["eval", "--help"])
     out = capsys.readouterr().out
-    assert "(default: 1000)" in out and "(default: 8)" in out and "--batch-size" in out
+    assert "(default: 1000)" in out and "(default: 8)" in out and "--num-envs" in out

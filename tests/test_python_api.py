@@ -64,3 +64,24 @@ def test_every_api_name_resolves():
 
     assert [n for n in nsl._API if not hasattr(nsl.api, n)] == []
     assert sorted(nsl.api.__all__) == sorted(nsl._API)
+
+
+def test_a_run_made_before_a_setting_existed_resumes_at_its_default(tmp_path, monkeypatch):
+    import json
+    from dataclasses import asdict, replace
+
+    import pytest
+
+    from nsl.errors import ConfigError
+    from nsl.services.options import OnlineConfig
+    from nsl.services.refs import open_run
+
+    monkeypatch.setenv("NSL_HOME", str(tmp_path))
+    config = OnlineConfig(shift="harsh_lighting@2")
+    run_dir = open_run("old", config)
+    old = {k: v for k, v in asdict(config).items() if k != "num_envs"}  # written before --num-envs existed
+    (run_dir / "config.json").write_text(json.dumps(old))
+    assert open_run("old", config) == run_dir
+    (run_dir / "config.json").write_text(json.dumps(old))
+    with pytest.raises(ConfigError, match="exists with a different configuration"):
+        open_run("old", replace(config, num_envs=4))

@@ -4,7 +4,8 @@ One name per idea across all commands (``tests/test_cli_options.py`` checks it):
 
 * ``--data``: dataset references (``NAME[@vN][:K]``), or the name a collection writes;
 * ``--checkpoint``: a checkpoint to use as it is; ``--init``: the parent a run starts from;
-* ``--batch-size``: how many items one batched call handles (transitions, or environments in lock-step);
+* ``--batch-size``: how many items one batched call handles (transitions, frames);
+* ``--num-envs``: environments per worker stepping in lock-step (collect, eval, online; Gymnasium's ``num_envs``);
 * ``--workers``: worker processes; ``--seed``: the seed; ``--json``: one JSON document on stdout, nothing else.
 
 Help texts show their defaults through :class:`HelpFormatter`.  Options that
@@ -42,16 +43,23 @@ def add_parser(sub: argparse._SubParsersAction, name: str, **kwargs) -> argparse
 
 # Old spellings still accepted (nsl.cli.main rewrites them and says the new name on stderr).
 RENAMED = {"--dataset": "--data", "--batch": "--batch-size"}
+# ... and those retired in some commands only: environments per worker were --batch-size in nsl 0.1.
+RENAMED_IN = {
+    command: {"--batch-size": "--num-envs", "--batch": "--num-envs"} for command in ("collect", "eval", "online")
+}
 
 
 def rename_old_options(argv: list[str]) -> list[str]:
     """``argv`` with retired option spellings replaced by the current ones (a note for each on stderr)."""
+    command = next((a for a in argv if not a.startswith("-")), "")
+    renamed = {**RENAMED, **RENAMED_IN.get(command, {})}
     out = []
     for arg in argv:
         name, eq, value = arg.partition("=")
-        if name in RENAMED:
-            print(f"nsl: {name} is now {RENAMED[name]}; the old name will go away", file=sys.stderr)
-            arg = RENAMED[name] + eq + value
+        if name in renamed:
+            where = f" in nsl {command}" if name in RENAMED_IN.get(command, {}) else ""
+            print(f"nsl: {name} is now {renamed[name]}{where}; the old name will go away", file=sys.stderr)
+            arg = renamed[name] + eq + value
         out.append(arg)
     return out
 
@@ -60,21 +68,22 @@ def add_json(p: argparse.ArgumentParser, what: str = "the result") -> None:
     p.add_argument("--json", action="store_true", help=f"print {what} as one JSON document on stdout, nothing else")
 
 
+def add_wait(p, what: str) -> None:
+    """``--wait``: queue behind another process that is writing the same thing instead of failing (nsl.locks)."""
+    p.add_argument(
+        "--wait",
+        action="store_true",
+        help=f"if another process is writing this {what}, wait for it to finish instead of failing at once "
+        "(one writer at a time; the refusal names the other process)",
+    )
+
+
 def add_workers(p, help: str = "worker processes (the results do not depend on it)") -> None:
     p.add_argument("--workers", type=int, default=1, help=help)
 
 
 def add_seed(p, default: int = 0, help: str = "seed") -> None:
     p.add_argument("--seed", type=int, default=default, help=help)
-
-
-def add_env_batch_size(p, default: int) -> None:
-    p.add_argument(
-        "--batch-size",
-        type=int,
-        default=default,
-        help="environments per worker stepping in lock-step; the policy acts on them as one batch",
-    )
 
 
 def add_field(p, config: type, name: str, *flags: str, **overrides) -> argparse.Action:

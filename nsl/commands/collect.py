@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import argparse
 
-from nsl.commands._options import add_field, add_parser
+from nsl.commands._options import add_field, add_parser, add_wait
 from nsl.services.options import CollectConfig
 
 
@@ -35,9 +35,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     for name in ("workers", "seed", "epsilon"):
         add_field(p, c, name)
     add_field(p, c, "action_noise", metavar="STD")
-    for name in ("batch_size", "split", "image_size", "episodes_per_file", "precision"):
+    for name in ("num_envs", "split", "image_size", "episodes_per_file", "precision"):
         add_field(p, c, name)
     p.add_argument("--restart", action="store_true", help="discard an unfinished collection of this dataset")
+    add_wait(p, "dataset")
     p.add_argument("--stop-after-files", type=int, default=0, help=argparse.SUPPRESS)  # tests: simulate a kill
     from nsl.cluster import add_option
 
@@ -51,5 +52,5 @@ def run(args: argparse.Namespace) -> int:
     from nsl.services.collect import collect
 
     config = CollectConfig(**{f.name: getattr(args, f.name) for f in fields(CollectConfig)})
-    collect(config, restart=args.restart, stop_after_files=args.stop_after_files, cluster=args.cluster)
+    collect(config, restart=args.restart, stop_after_files=args.stop_after_files, cluster=args.cluster, wait=args.wait)
     return 0

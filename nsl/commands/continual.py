@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from nsl.commands._options import add_field, add_parser
+from nsl.commands._options import add_field, add_parser, add_wait
 from nsl.services.options import ContinualConfig
 
 
@@ -24,6 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--name", default="continual", help="run name (folder under $NSL_HOME/runs, dataset prefix)")
     for name in ("episodes", "steps", "eval_episodes", "epsilon", "workers", "seed", "single"):
         add_field(p, c, name)
+    add_wait(p, "run")
     p.set_defaults(func=run, config=ContinualConfig)
 
 
@@ -34,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
 
     values = {f.name: getattr(args, f.name) for f in fields(ContinualConfig)}
     values["sequence"] = tuple(s.strip() for s in args.sequence.split(",") if s.strip())
-    result = nsl.continual(ContinualConfig(**values), name=args.name)
+    result = nsl.continual(ContinualConfig(**values), name=args.name, wait=args.wait)
     print(result.metrics.markdown())
     print(f"plots and tables: nsl report {result.run_dir}")
     return 0

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from nsl.commands._options import add_field, add_parser
+from nsl.commands._options import add_field, add_parser, add_wait
 from nsl.services.options import EfficiencyConfig
 
 
@@ -27,6 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--name", default="efficiency", help="run name (folder under $NSL_HOME/runs, checkpoint prefix)")
     for name in ("steps", "eval_episodes", "workers", "seed", "scratch"):
         add_field(p, c, name)
+    add_wait(p, "run")
     p.set_defaults(func=run, config=EfficiencyConfig)
 
 
@@ -43,6 +44,6 @@ def run(args: argparse.Namespace) -> int:
     import nsl
 
     values = {f.name: getattr(args, f.name) for f in fields(EfficiencyConfig)}
-    nsl.efficiency(EfficiencyConfig(**{**values, "data": tuple(args.data)}), name=args.name)
+    nsl.efficiency(EfficiencyConfig(**{**values, "data": tuple(args.data)}), name=args.name, wait=args.wait)
     print(f"plots and tables: nsl report {args.name}")
     return 0

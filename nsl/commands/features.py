@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from nsl.commands._options import add_field, add_parser
+from nsl.commands._options import add_field, add_parser, add_wait
 from nsl.services.options import FeaturesConfig
 
 
@@ -20,6 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--name", default="features", help="checkpoint name: the result is ckpt:NAME")
     for name in ("like", "encoder", "classes", "frames", "steps", "batch_size", "lr", "seed"):
         add_field(p, FeaturesConfig, name)
+    add_wait(p, "run")
     p.set_defaults(func=run, config=FeaturesConfig)
 
 
@@ -29,7 +30,9 @@ def run(args: argparse.Namespace) -> int:
     import nsl
 
     result = nsl.features(
-        FeaturesConfig(**{f.name: getattr(args, f.name) for f in fields(FeaturesConfig)}), name=args.name
+        FeaturesConfig(**{f.name: getattr(args, f.name) for f in fields(FeaturesConfig)}),
+        name=args.name,
+        wait=args.wait,
     )
     print(result.summary())
     return 0

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from nsl.commands._options import add_field, add_parser
+from nsl.commands._options import add_field, add_parser, add_wait
 from nsl.services.options import OnlineConfig
 
 
@@ -24,9 +24,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--name", default="online", help="run name (folder under $NSL_HOME/runs, dataset prefix)")
     for name in ("rounds", "episodes", "steps", "ratio", "eval_episodes", "eval_scenes", "epsilon", "workers", "seed"):
         add_field(p, c, name)
+    add_field(p, c, "num_envs", type=int)
+
     add_field(p, c, "method", choices=("ft", "new_head"))
     add_field(p, c, "learner")
     add_field(p, c, "precision")
+    add_wait(p, "run")
     p.set_defaults(func=run, config=OnlineConfig)
 
 
@@ -37,6 +40,6 @@ def run(args: argparse.Namespace) -> int:
 
     values = {f.name: getattr(args, f.name) for f in fields(OnlineConfig)}
     values["base_data"] = tuple(args.base_data) if args.base_data else OnlineConfig.base_data
-    result = nsl.online(OnlineConfig(**values), name=args.name)
+    result = nsl.online(OnlineConfig(**values), name=args.name, wait=args.wait)
     print(result.markdown())
     return 0

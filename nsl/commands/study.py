@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from nsl.commands._options import add_json, add_parser, add_workers
+from nsl.commands._options import add_json, add_parser, add_wait, add_workers
 
 CLUSTER_HELP = (
     "where units run: local processes (default, or $NSL_CLUSTER; see --workers), or each unit as a Ray task on "
@@ -38,6 +38,7 @@ def run_options(args: argparse.Namespace) -> dict:
         "cluster": args.cluster,
         "unit_cpus": args.unit_cpus,
         "store": args.store,
+        "wait": args.wait,
     }
 
 
@@ -83,6 +84,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_option(r, help=CLUSTER_HELP)
     add_unit_cpus(r)
     r.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_wait(r, "study")
     r.add_argument(
         "--estimate",
         action="store_true",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from nsl.commands._options import add_field, add_parser
+from nsl.commands._options import add_field, add_parser, add_wait
 from nsl.services.options import TrainOptions
 
 METHODS = (
@@ -55,6 +55,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_field(p, c, "crop", type=int)
     add_field(p, c, "net", action="append")
     add_field(p, c, "precision")
+    add_wait(p, "run")
     es = p.add_argument_group("early stopping (evaluates every --eval-every steps)")
     for name in ("eval_every", "eval_episodes", "base_episodes", "target_shift", "patience"):
         add_field(es, c, name)
@@ -76,5 +77,5 @@ def options_from(args: argparse.Namespace) -> TrainOptions:
 def run(args: argparse.Namespace) -> int:
     import nsl
 
-    nsl.train(options_from(args))
+    nsl.train(options_from(args), wait=args.wait)
     return 0

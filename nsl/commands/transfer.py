@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from nsl.commands._options import add_json, add_parser, add_workers
+from nsl.commands._options import add_json, add_parser, add_wait, add_workers
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -35,6 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_option(r, help=CLUSTER_HELP)
     add_unit_cpus(r)
     r.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_wait(r, "transfer")
     r.add_argument(
         "--estimate",
         action="store_true",

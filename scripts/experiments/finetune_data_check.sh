@@ -18,14 +18,14 @@ export OMP_NUM_THREADS=1
 for variant in "${@:-own-small scripted}"; do
   for v in $variant; do
     if [ "$v" = own-small ]; then
-      $NSL collect --shift base --episodes 600 --policy ckpt:base --epsilon 0.1 --data own-base --workers 1 --batch-size 4
+      $NSL collect --shift base --episodes 600 --policy ckpt:base --epsilon 0.1 --data own-base --workers 1 --num-envs 4
       $NSL collect --shift harsh_lighting --episodes 200 --policy ckpt:base --epsilon 0.1 --data own-harsh --workers 1 \
-        --batch-size 4
+        --num-envs 4
       data=(--data own-base=0.5 --data own-harsh=0.5); shift=harsh_lighting
     elif [ "$v" = scripted ]; then
       NSL=$NSL bash scripts/collect_base_data.sh
       $NSL collect --shift harsh_lighting@2 --episodes 800 --policy ckpt:base --epsilon 0.1 --seed 5 \
-        --data own-harsh-2 --workers 2 --batch-size 8
+        --data own-harsh-2 --workers 2 --num-envs 8
       data=(--data grasp-base-oracle=0.26923 --data grasp-base-noisy=0.11538 --data grasp-base-random=0.11538
             --data own-harsh-2:400=0.5); shift=harsh_lighting@2
     else

@@ -16,7 +16,7 @@ import json
 import math
 from pathlib import Path
 
-from scipy import stats
+from nsl.stats import t_interval, welch_interval
 
 
 def rates(path: Path) -> dict[str, dict[str, float]]:
@@ -27,19 +27,13 @@ def rates(path: Path) -> dict[str, dict[str, float]]:
 
 
 def mean_t(values: list[float]) -> tuple[float, float]:
-    m = sum(values) / len(values)
-    if len(values) < 2:
-        return m, float("nan")
-    sd = math.sqrt(sum((v - m) ** 2 for v in values) / (len(values) - 1))
-    return m, float(stats.t.ppf(0.975, len(values) - 1)) * sd / math.sqrt(len(values))
+    got = t_interval(values)
+    return (values[0], float("nan")) if got is None else got
 
 
 def welch(a: list[float], b: list[float]) -> tuple[float, float]:
     """Difference of means b - a with a 95% Welch t half-width."""
-    va = stats.tvar(a) / len(a)
-    vb = stats.tvar(b) / len(b)
-    dof = (va + vb) ** 2 / (va**2 / (len(a) - 1) + vb**2 / (len(b) - 1)) if va + vb > 0 else 1
-    return sum(b) / len(b) - sum(a) / len(a), float(stats.t.ppf(0.975, dof)) * math.sqrt(va + vb)
+    return welch_interval(a, b)
 
 
 def pct(m: float, half: float | None = None) -> str:

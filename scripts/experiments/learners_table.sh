@@ -50,7 +50,7 @@ for L in "${LEARNERS[@]}"; do
   for S in "${SHIFTS[@]}"; do
     tag="${S%@*}"
     $NSL collect --shift "$S" --episodes 800 --policy "ckpt:$L-base-s0@6000" --epsilon 0.1 --data "$L-$tag" \
-      --seed 5 --workers 2 --batch-size 8
+      --seed 5 --workers 2 --num-envs 8
     fts=""
     for s in "${SEEDS[@]}"; do
       $NSL train --learner "$L" --init "ckpt:$L-base-s0@6000" --data "$L-$tag:800=0.5" $FT_BASE_MIX \

@@ -15,8 +15,8 @@ HOME_DIR="${NSL_HOME:-$HOME/.nsl}"
 
 # The demo's two datasets (the same commands as scripts/demo.sh, so the same content hashes; a finished
 # collection is not repeated, an interrupted one resumes).
-$NSL collect --shift base --episodes 600 --policy oracle:1.0 --data demo-base --workers 2 --batch-size 4
-$NSL collect --shift harsh_lighting --episodes 100 --policy oracle:1.0 --data demo-harsh --workers 2 --batch-size 4
+$NSL collect --shift base --episodes 600 --policy oracle:1.0 --data demo-base --workers 2 --num-envs 4
+$NSL collect --shift harsh_lighting --episodes 100 --policy oracle:1.0 --data demo-harsh --workers 2 --num-envs 4
 
 for ref in "$@"; do
   # ckpt:NAME@STEP -> plast-NAME-STEP (a valid checkpoint name)

@@ -38,11 +38,11 @@ def slug(shift: str) -> str:
 
 def over_seeds(bf16: list[float], fp32: list[float]) -> str:
     """Mean of the per-seed differences (seed s in bf16 minus seed s in fp32, points) and its 95% t interval."""
-    from scipy import stats
+    from nsl.stats import t_interval
 
     d = [a - b for a, b in zip(bf16, fp32)]
-    half = stats.t.ppf(0.975, len(d) - 1) * statistics.stdev(d) / len(d) ** 0.5
-    return f"{statistics.mean(d):+.1f} [{statistics.mean(d) - half:+.1f}, {statistics.mean(d) + half:+.1f}]"
+    m, half = t_interval(d) or (statistics.mean(d), float("nan"))
+    return f"{m:+.1f} [{m - half:+.1f}, {m + half:+.1f}]"
 
 
 def paired(bf16: list[bool], fp32: list[bool]) -> str:
@@ -69,7 +69,7 @@ def main() -> None:
             data=data,
             seed=5,
             workers=args.workers,
-            batch_size=8,
+            num_envs=8,
             progress=False,
         )
         rates: dict[str, list[tuple[int, int]]] = {}

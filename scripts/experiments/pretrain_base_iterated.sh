@@ -21,17 +21,17 @@ NSL=$NSL bash scripts/collect_base_data.sh
 # Round 1, two collectors trained on the scripted data only, 667 episodes each (10% random actions):
 #   the shipped one-step base (ckpt:base, nsl/assets/base) ...
 $NSL collect --shift base --episodes 667 --policy ckpt:base --epsilon 0.1 \
-  --data grasp-base-learned --seed 4 --workers 2 --batch-size 8
+  --data grasp-base-learned --seed 4 --workers 2 --num-envs 8
 #   ... and a Monte-Carlo run on the scripted data (67% on the selection scenes).
 $NSL train --data grasp-base-oracle=0.5 --data grasp-base-noisy=0.25 --data grasp-base-random=0.25 $MC \
   --eval-every 2000 --eval-scenes 2000 --eval-episodes 50 --patience 100 --name s1-n8-cos6k
 $NSL collect --shift base --episodes 667 --policy ckpt:s1-n8-cos6k@6000 --epsilon 0.1 \
-  --data grasp-base-learned2 --seed 4 --workers 2 --batch-size 8
+  --data grasp-base-learned2 --seed 4 --workers 2 --num-envs 8
 
 # Round 2: a policy trained on the scripted data and round 1 collects 666 more.
 $NSL train $SCRIPTED --data grasp-base-learned:667=0.175 --data grasp-base-learned2:667=0.175 $MC --name c1-r1p
 $NSL collect --shift base --episodes 666 --policy ckpt:c1-r1p@6000 --epsilon 0.1 \
-  --data grasp-base-learned3 --seed 5 --workers 2 --batch-size 8
+  --data grasp-base-learned3 --seed 5 --workers 2 --num-envs 8
 
 # The base: all 10,000 episodes, the learned rounds together at 35% of each batch, a wider head; two seeds.
 for seed in 0 1; do

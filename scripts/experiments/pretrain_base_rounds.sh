@@ -58,7 +58,7 @@ timed train-r0 $NSL train --data grasp-base-oracle=0.5 --data grasp-base-noisy=0
 n=${#ROUNDS[@]}
 for ((i = 1; i <= n; i++)); do
   timed "collect-r$i" $NSL collect --shift base --episodes "${ROUNDS[i - 1]}" --policy "ckpt:rounds-r$((i - 1))@6000" \
-    --epsilon 0.1 --data "grasp-rounds-$i" --seed $((10 + i)) --workers 2 --batch-size 8
+    --epsilon 0.1 --data "grasp-rounds-$i" --seed $((10 + i)) --workers 2 --num-envs 8
   timed "train-r$i" $NSL train $SCRIPTED $(learned_mix $i) $MC --name "rounds-r$i"
 done
 for s in "${SEEDS[@]}"; do

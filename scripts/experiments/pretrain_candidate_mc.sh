@@ -15,7 +15,7 @@ NSL=$NSL bash scripts/collect_base_data.sh
 $NSL train --data grasp-base-oracle=0.5 --data grasp-base-noisy=0.25 --data grasp-base-random=0.25 --steps 6000 --eval-every 2000 --eval-scenes 2000 --eval-episodes 50 --patience 100 --crop 2 --name base-stage1 --net action_dims=0,1,3
 
 # 2,000 more episodes from the stage-1 policy with 10% random actions (61% success here): 10,000 in all.
-$NSL collect --shift base --episodes 2000 --policy ckpt:base-stage1@6000 --epsilon 0.1 --data grasp-base-learned --seed 4 --workers 2 --batch-size 8
+$NSL collect --shift base --episodes 2000 --policy ckpt:base-stage1@6000 --epsilon 0.1 --data grasp-base-learned --seed 4 --workers 2 --num-envs 8
 
 # Stage 2: from scratch again, Monte-Carlo returns (--n-step 8 spans the whole episode) on all four
 # datasets, with the learning rate cosine-decayed to 5% over the 6,000 steps; four seeds.

@@ -41,7 +41,7 @@ source scripts/experiments/rounds_base_half.sh  # $BASE
       --data grasp-base-random=0.11538"
 own_base_task() {  # 8,000 base-task episodes the base collects itself (resumes, or does nothing, when they exist)
   $NSL collect --shift base --episodes 8000 --policy ckpt:rounds-r4@6000 --epsilon 0.1 --data grasp-base-own --seed 20 \
-    --workers 2 --batch-size 8
+    --workers 2 --num-envs 8
 }
 if [ "${BASE_HALF:-}" = own ]; then
   own_base_task
@@ -62,7 +62,7 @@ for s in ${SHIFTS:-harsh_lighting transparent_objects@0.8 checkerboard_backing@0
     target="protocol-eps${EPSILON:-0.1}${NOISE:+-noise$NOISE}-$sl-by-base"
     [ "$n" = 800 ] || target="protocol-eps${EPSILON:-0.1}${NOISE:+-noise$NOISE}-n$n-$sl-by-base"
     $NSL collect --shift "$s" --episodes "$n" --policy ckpt:rounds-r4@6000 --epsilon "${EPSILON:-0.1}" \
-      ${NOISE:+--action-noise $NOISE} --data "$target" --seed 5 --workers 2 --batch-size 8
+      ${NOISE:+--action-noise $NOISE} --data "$target" --seed 5 --workers 2 --num-envs 8
   fi
   $NSL train --init "${INIT:-ckpt:rounds-r4@6000}" --steps 1000 --conservative 0 $BASE --data "$target=0.5" \
     --checkpoint-every 500 "${OPTIONS[@]}" --name "$VARIANT-$sl"

@@ -21,7 +21,7 @@ for s in ${SHIFTS:-harsh_lighting@2 offset_gripper@0.25}; do
   first="${VARIANT:-mcft4}-$sl"
   [ -d "${NSL_HOME:-$HOME/.nsl}/checkpoints/$first" ] || first="mcft-$sl"
   $NSL collect --shift "$s" --episodes 800 --policy "ckpt:$first@latest" --epsilon 0.1 --data "protocol-round2-$sl" \
-    --seed 6 --workers 2 --batch-size 8
+    --seed 6 --workers 2 --num-envs 8
   $NSL train --init ckpt:rounds-r4@6000 --steps 1000 --conservative 0 $BASE --data "protocol-rounds-$sl-by-base:800=0.25" \
     --data "protocol-round2-$sl=0.25" --checkpoint-every 500 --n-step 8 --crop 2 --name "round2-$sl"
   [ -s "$OUT/$sl.json" ] || $NSL eval --checkpoint "ckpt:round2-$sl@latest" --shift "$s,base" --episodes 400 \

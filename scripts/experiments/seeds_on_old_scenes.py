@@ -26,10 +26,9 @@ from nsl.study.units import train_tag
 
 
 def t_interval(values: list[float]) -> str:
-    from scipy import stats
+    from nsl.stats import t_interval as t95
 
-    m = statistics.mean(values)
-    half = stats.t.ppf(0.975, len(values) - 1) * statistics.stdev(values) / len(values) ** 0.5
+    m, half = t95(values) or (statistics.mean(values), float("nan"))
     return f"{m:+.1f} [{m - half:+.1f}, {m + half:+.1f}]"
 
 
@@ -43,7 +42,7 @@ def main() -> None:
     plan = load_plan(args.study)
     f = plan.finetune
     top = f.tiers[-1]
-    opts = dict(episodes=args.episodes, seed=args.scenes, workers=args.workers, batch_size=8)
+    opts = dict(episodes=args.episodes, seed=args.scenes, workers=args.workers, num_envs=8)
     print(
         f"| shift | base | fine-tuned, mean of seeds {', '.join(map(str, f.seeds))} | gain over seeds [t 95%] "
         "| gain pooled [paired 95%] |"

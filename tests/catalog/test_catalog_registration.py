@@ -123,7 +123,7 @@ def test_training_again_under_a_new_name_adds_an_alias_and_shares_the_weights(ca
             "oracle:0.5",
             "--data",
             "tiny",
-            "--batch-size",
+            "--num-envs",
             "4",
         )
         == 0

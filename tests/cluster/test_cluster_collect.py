@@ -28,7 +28,7 @@ COLLECT = [
     "16",
     "--policy",
     "oracle:0.5",
-    "--batch-size",
+    "--num-envs",
     "2",
     "--episodes-per-file",
     "5",
@@ -43,7 +43,7 @@ EVAL = [
     "base,checkerboard_backing",
     "--episodes",
     "16",
-    "--batch-size",
+    "--num-envs",
     "2",
     "--json",
 ]
@@ -177,7 +177,7 @@ def test_checkpoint_policy_evaluates_the_same_on_two_nodes(ray_cluster, capsys):
         "base,harsh_lighting",
         "--episodes",
         "16",
-        "--batch-size",
+        "--num-envs",
         "4",
         "--json",
     ]

@@ -68,3 +68,31 @@ def test_unsupported_render_mode_is_refused():
     with pytest.raises(ConfigError, match="render_mode 'human'"):
         GraspEnv(render_mode="human")
     assert nsl.collectors.GYM_ID in gymnasium.registry
+
+
+def test_lerobot_observation_keys_through_gym_make_and_preprocess_observation():
+    from lerobot.envs.utils import preprocess_observation
+
+    env = gymnasium.make(GYM_ID, obs_type="pixels_agent_pos")
+    try:
+        assert set(env.observation_space.spaces) == {"pixels", "agent_pos"}
+        obs, _ = env.reset(seed=5)
+        assert set(obs) == {"pixels", "agent_pos"} and env.observation_space.contains(obs)
+        batched = {k: np.stack([v, v]) for k, v in obs.items()}  # as LeRobot's vector envs give it
+        for given, n in ((obs, 1), (batched, 2)):
+            out = preprocess_observation(given)
+            assert set(out) == {"observation.image", "observation.state"}
+            assert out["observation.image"].shape == (n, 3, 64, 64) and out["observation.state"].shape == (n, 6)
+        np.testing.assert_allclose(out["observation.image"][0].permute(1, 2, 0).numpy() * 255, obs["pixels"])
+        np.testing.assert_array_equal(out["observation.state"][0].numpy(), obs["agent_pos"])
+    finally:
+        env.close()
+    plain = GraspEnv()  # the default keeps nsl's keys, with the same content
+    try:
+        nsl_obs, _ = plain.reset(seed=5)
+        assert set(nsl_obs) == {"image", "state"}
+        np.testing.assert_array_equal(nsl_obs["image"], obs["pixels"])
+    finally:
+        plain.close()
+    with pytest.raises(ConfigError, match="obs_type 'rgb'"):
+        GraspEnv(obs_type="rgb")

@@ -39,7 +39,7 @@ def home(tmp_path_factory):
                 "oracle:0.5",
                 "--data",
                 "d-base",
-                "--batch-size",
+                "--num-envs",
                 "4",
             ]
         )
@@ -57,7 +57,7 @@ def home(tmp_path_factory):
                 "oracle:0.5",
                 "--data",
                 "d-harsh",
-                "--batch-size",
+                "--num-envs",
                 "4",
             ]
         )

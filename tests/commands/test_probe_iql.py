@@ -44,7 +44,7 @@ def test_iql_probe_warms_up_v_alone_then_trains_q(tmp_path, monkeypatch):
             "oracle:0.5",
             "--data",
             "grasp-base",
-            "--batch-size",
+            "--num-envs",
             "4",
         )
         == 0
@@ -60,7 +60,7 @@ def test_iql_probe_warms_up_v_alone_then_trains_q(tmp_path, monkeypatch):
             "oracle:0.5",
             "--data",
             "grasp-harsh",
-            "--batch-size",
+            "--num-envs",
             "4",
         )
         == 0

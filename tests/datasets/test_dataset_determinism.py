@@ -1,7 +1,7 @@
 """The same collection command gives the same dataset, bit for bit, in any workspace and worker layout.
 
 Each case collects one small dataset twice through the real CLI, in two workspaces at different paths, with
-different ``--workers`` and ``--batch-size`` (one worker runs in this process with its torch threads, two run
+different ``--workers`` and ``--num-envs`` (one worker runs in this process with its torch threads, two run
 in worker processes with one thread each), and compares every episode's content hash and the version hash.
 """
 
@@ -43,7 +43,7 @@ def test_a_collection_is_the_same_in_any_workspace_worker_count_and_batch_size(c
                 "same",
                 "--workers",
                 workers,
-                "--batch-size",
+                "--num-envs",
                 batch,
                 "--episodes-per-file",
                 "4",

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
+import torch
 
+import nsl
 from nsl.catalog import Catalog, origin_of
+from nsl.errors import UnknownReferenceError
 from tests.conftest import run_cli
 
 REPO = "lab/grasp-syn"
@@ -130,3 +134,57 @@ def test_hub_errors_are_one_line(publisher, hub, src, message, capsys):
     assert run_cli("pull", src) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err, err
+
+
+# ----------------------------------------------- nsl.load_policy: a folder, a catalog reference or a pushed repo
+
+
+@pytest.fixture
+def observation():
+    """One LeRobot observation batch from the 16x16 task (the publisher's tiny networks see 16x16 frames)."""
+    from lerobot.envs.utils import preprocess_observation
+
+    from nsl.collectors import GraspEnv
+
+    env = GraspEnv(image_size=16, obs_type="pixels_agent_pos")
+    try:
+        obs, _ = env.reset(seed=3)
+    finally:
+        env.close()
+    return obs, preprocess_observation(obs)
+
+
+def test_load_policy_from_a_folder_a_catalog_reference_and_pushed_repos(publisher, hub, s3, workspace_b, observation):
+    """One call loads a checkpoint as ``from_pretrained`` does; it acts through nsl's call and LeRobot's."""
+    raw, batch = observation
+    with Catalog() as cat:
+        entry = cat.resolve_checkpoint("ckpt:ft-syn")
+    by_ref = nsl.load_policy("ckpt:ft-syn")
+    action = by_ref.select_action(batch)
+    assert isinstance(action, torch.Tensor) and action.shape == (1, 6) and action.dtype == torch.float32
+    assert action.abs().max() <= 1.0
+    by_folder = nsl.load_policy(entry.path)
+    assert torch.equal(by_folder.select_action(batch), action)  # same checkpoint, same seed: the same action
+    by_ref.reset()
+    assert torch.equal(by_ref.select_action(batch), action)  # reset() starts the draws over
+    # nsl's own call, on nsl's observation keys
+    nsl_obs = {"image": raw["pixels"][None], "state": raw["agent_pos"][None]}
+    assert by_folder(nsl_obs, rngs=[np.random.default_rng(0)]).shape == (1, 6)
+    assert by_folder.describe()["checkpoint_id"] == entry.id
+
+    assert run_cli("push", "ckpt:ft-syn", "hf://lab/ft-syn") == 0
+    assert run_cli("push", "ckpt:ft-syn", f"{s3}/lab/ft-syn") == 0
+    home = workspace_b()  # a lab with an empty workspace loads them by repo id and URL
+    for source in ("lab/ft-syn", "hf://lab/ft-syn@main", f"{s3}/lab/ft-syn"):
+        pulled = nsl.load_policy(source)
+        assert pulled.describe()["checkpoint_id"] == entry.id, source
+        assert torch.equal(pulled.select_action(batch), action), source
+    assert (home / "cache" / "policies").is_dir()
+    with Catalog() as cat:  # verified into the cache, not catalogued
+        with pytest.raises(UnknownReferenceError):
+            cat.resolve_checkpoint("ckpt:ft-syn")
+
+
+def test_load_policy_of_an_unknown_source_is_one_line(tmp_path):
+    with pytest.raises(UnknownReferenceError, match="neither a folder, a catalog reference"):
+        nsl.load_policy(tmp_path / "missing" / "deeper")
