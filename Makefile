@@ -5,7 +5,7 @@ NSL := $(VENV)/bin/nsl
 export MUJOCO_GL ?= egl
 export NSL_HOME ?= $(CURDIR)/.nsl-demo
 
-.PHONY: install lint demo test test-slow bench clean
+.PHONY: install lint demo test test-no-bf16 test-slow bench clean
 
 $(VENV)/.installed: pyproject.toml
 	@command -v python3 >/dev/null || { echo "python3 (>= 3.11) is required"; exit 1; }
@@ -25,8 +25,17 @@ lint: install
 	$(PY) -m ruff format --check .
 	PY=$(PY) bash scripts/typecheck.sh
 
+# The default suite (under 10 minutes on 2 cores), its 15 slowest tests listed at the end.  On a CPU with bfloat16
+# the tests whose behaviour depends on it (marker `precision`) run once more with it switched off (NSL_BF16=0), as
+# on a CPU without it; on a CPU without it the first run was that run.
+BF16 = $(PY) -c "from nsl.learners.precision import bf16_supported; raise SystemExit(not bf16_supported())"
 test: lint
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --durations=15
+	if $(BF16); then NSL_BF16=0 $(PY) -m pytest -q -m 'precision and not slow' -p no:cacheprovider; fi
+
+# The whole default suite as on a CPU without bfloat16 (AVX-512 BF16 or AMX).
+test-no-bf16: install
+	NSL_BF16=0 $(PY) -m pytest -q --durations=15
 
 test-slow: install
 	$(PY) -m pytest -q -m slow

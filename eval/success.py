@@ -48,7 +48,7 @@ def run_eval_episodes(
     ):
         out.append(ep)
         bar.update(1)
-        bar.set_postfix(success=f"{sum(e.success for e in out) / len(out):.2f}")
+        bar.set_postfix(success=f"{sum(e.success for e in out) / len(out):.2f}", refresh=False)
     bar.close()
     return out
 

@@ -8,11 +8,16 @@ float32; the log loss and the Bellman targets are computed in float32.
 
 ``auto`` resolves to ``bf16`` where the CPU supports it and to ``fp32``
 elsewhere; asking for ``bf16`` on a CPU without it is an error.
+
+``NSL_BF16=0`` in the environment makes nsl treat the CPU as one without
+bfloat16 (``auto`` is then ``fp32``): the common case on rented cloud machines,
+and how the test suite checks that it passes there too.
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 from collections.abc import Iterator
 
 import torch
@@ -20,10 +25,14 @@ import torch
 from nsl.errors import ConfigError
 
 PRECISIONS = ("fp32", "bf16", "auto")
+BF16_ENV = "NSL_BF16"  # "0" (or "off", "false", "no"): act as if this CPU had no bfloat16 arithmetic
 
 
 def bf16_supported() -> bool:
-    """True when this CPU has native bfloat16 arithmetic (AVX-512 BF16 or AMX tiles) that torch can use."""
+    """True when this CPU has native bfloat16 arithmetic (AVX-512 BF16 or AMX tiles) that torch can use, and
+    ``NSL_BF16`` does not switch it off."""
+    if os.environ.get(BF16_ENV, "").strip().lower() in ("0", "off", "false", "no"):
+        return False
     cpu = getattr(torch._C, "_cpu", None)
     if cpu is None:
         return False

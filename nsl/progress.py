@@ -3,11 +3,14 @@
 On a terminal a tqdm bar redraws in place.  In a log file or CI (stderr is not
 a terminal) a redrawn bar would write thousands of ``\\r`` updates; there,
 :func:`progress_bar` prints a plain line at most every :data:`LOG_INTERVAL`
-seconds, and one at the end, as pip and huggingface_hub do.
+seconds, and one at the end, as pip and huggingface_hub do.  Changing a bar's
+postfix or description redraws a tqdm bar at once by default; in a log that
+would be a line per episode, so there it waits for the bar's next line.
 """
 
 from __future__ import annotations
 
+import functools
 import sys
 from typing import Any, TextIO
 
@@ -37,6 +40,27 @@ def is_terminal(stream: Any) -> bool:
         return False
 
 
+@functools.cache
+def _log_bar_class():
+    """A tqdm whose postfix and description changes never force a redraw (the next timed line shows them)."""
+    from tqdm import tqdm
+
+    class LogBar(tqdm):
+        def set_postfix(self, ordered_dict=None, refresh=True, **kwargs):
+            super().set_postfix(ordered_dict, refresh=False, **kwargs)
+
+        def set_postfix_str(self, s="", refresh=True):
+            super().set_postfix_str(s, refresh=False)
+
+        def set_description(self, desc=None, refresh=True):
+            super().set_description(desc, refresh=False)
+
+        def set_description_str(self, desc=None, refresh=True):
+            super().set_description_str(desc, refresh=False)
+
+    return LogBar
+
+
 def progress_bar(*args: Any, file: TextIO | None = None, **kwargs: Any):
     """A ``tqdm`` bar on a terminal; elsewhere the same bar printing a line every :data:`LOG_INTERVAL` seconds."""
     from tqdm import tqdm
@@ -45,5 +69,6 @@ def progress_bar(*args: Any, file: TextIO | None = None, **kwargs: Any):
     if is_terminal(stream):
         return tqdm(*args, file=stream, **kwargs)
     kwargs.pop("dynamic_ncols", None)
+    kwargs["leave"] = True  # a log keeps the last line (the count and the rate), even of a bar a terminal clears
     kwargs.update(mininterval=LOG_INTERVAL, maxinterval=LOG_INTERVAL, ncols=100, ascii=True)
-    return tqdm(*args, file=_Lines(stream), **kwargs)
+    return _log_bar_class()(*args, file=_Lines(stream), **kwargs)

@@ -73,45 +73,62 @@ def _nsl(home: Path, *argv: str, plugin: Path | None = None) -> subprocess.Compl
     )
 
 
-def test_the_example_plugin_renders_collects_trains_and_runs_a_study(plugin_path, tmp_path):
+@pytest.fixture
+def installed(plugin_path, monkeypatch, tmp_path):
+    """The example package importable in this process, as after `pip install` (its entry points found), for
+    in-process commands; NSL_HOME is ``tmp_path/home``.  Afterwards nsl forgets the package again."""
+    from nsl import plugins
+    from nsl.collectors import policies, shifts
+    from nsl.learners import registry
+
+    for module, registered in ((shifts, "SHIFTS"), (policies, "_REGISTERED"), (registry, "_REGISTERED")):
+        monkeypatch.setattr(module, registered, dict(getattr(module, registered)))  # forget the plugin's afterwards
     home = tmp_path / "home"
     home.mkdir()
-    out = _nsl(
-        home, "render", "--shift", "base,lens_occluder@2", "--episodes", "2", "--out", "g.png", plugin=plugin_path
+    monkeypatch.setenv("NSL_HOME", str(home))
+    monkeypatch.syspath_prepend(str(plugin_path))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(ROOT), str(plugin_path)]))  # study unit processes
+    plugins._entry_points.cache_clear()
+    yield home
+    plugins._entry_points.cache_clear()
+
+
+def test_the_example_plugin_renders_collects_trains_and_runs_a_study(installed, plugin_path, tmp_path, capsys):
+    from tests.conftest import run_cli
+
+    home = installed
+    assert (
+        run_cli("render", "--shift", "base,lens_occluder@2", "--episodes", "2", "--out", str(tmp_path / "g.png")) == 0
     )
-    assert out.returncode == 0, out.stderr[-2000:]
     assert (tmp_path / "g.png").stat().st_size > 0
 
     collect = ["collect", "--shift", "lens_occluder@2", "--policy", "nsl_occluder.centre:0.3", "--episodes", "8"]
-    out = _nsl(home, *collect, "--data", "occluded", "--batch-size", "4", "--workers", "1", plugin=plugin_path)
-    assert out.returncode == 0, out.stderr[-2000:]
+    assert run_cli(*collect, "--data", "occluded", "--num-envs", "4", "--workers", "1") == 0
     meta = json.loads(next((home / "datasets" / "occluded").glob("v*/meta/nsl.json")).read_text())
     spec = meta["collections"][-1]["spec"]
     assert spec["env"]["shift_spec"]["shifts"][0]["plugin"] == PACKAGE  # the shift's package and version
     assert spec["policy"]["plugin"] == PACKAGE and spec["policy"]["noise"] == 0.3
 
-    out = _nsl(home, "train", "--data", "occluded", "--init", "ckpt:base", "--steps", "3", "--batch-size", "8",
-               "--name", "occ", plugin=plugin_path)  # fmt: skip
-    assert out.returncode == 0, out.stderr[-2000:]
+    train = ["train", "--data", "occluded", "--init", "ckpt:base", "--batch-size", "8"]
+    assert run_cli(*train, "--steps", "3", "--name", "occ") == 0
     bandit = ["--learner", "nsl_occluder.bandit:reward_scale=0.9", "--name", "occ-bandit"]
-    out = _nsl(home, "train", "--data", "occluded", "--init", "ckpt:base", "--steps", "2", "--batch-size", "8",
-               *bandit, plugin=plugin_path)  # fmt: skip
-    assert out.returncode == 0, out.stderr[-2000:]
+    assert run_cli(*train, "--steps", "2", *bandit) == 0
     config = json.loads((home / "runs" / "occ-bandit" / "final" / "config.json").read_text())
     assert config["learner"] == {"name": "nsl_occluder.bandit", "plugin": PACKAGE}
     assert config["training"]["learner_options"] == {"reward_scale": 0.9}
-    out = _nsl(home, "train", "--data", "occluded", "--init", "ckpt:base", "--steps", "2", "--method", "pnn",
-               "--learner", "nsl_occluder.bandit", "--name", "occ-pnn", plugin=plugin_path)  # fmt: skip
-    assert "learner 'nsl_occluder.bandit' does not support method 'pnn'" in out.stderr
+    capsys.readouterr()
+    pnn = ["--method", "pnn", "--learner", "nsl_occluder.bandit", "--name", "occ-pnn"]
+    assert run_cli(*train, "--steps", "2", *pnn) != 0
+    assert "learner 'nsl_occluder.bandit' does not support method 'pnn'" in capsys.readouterr().err
 
     plan = tmp_path / "plugin.toml"
     plan.write_text(PLAN)
-    out = _nsl(home, "study", "run", str(plan), "--quiet", plugin=plugin_path)
-    assert out.returncode == 0, out.stderr[-2000:]
+    assert run_cli("study", "run", str(plan), "--quiet") == 0
     records = json.loads((home / "studies" / "plugin" / "records.json").read_text())
     assert "lens_occluder@2" in json.dumps(records["finetune"])
 
-    # the plugin uninstalled: the dataset it made is refused in one line that names the package
+    # the plugin uninstalled (a fresh process without it): the dataset it made is refused in one line that names
+    # the package
     out = _nsl(home, "dataset", "show", "occluded")
     assert out.returncode != 0
     assert "made with the plugin package nsl-occluder 0.1.0, which is not installed here" in out.stderr

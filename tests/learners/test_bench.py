@@ -9,6 +9,7 @@ import pytest
 from nsl.cli import main
 
 
+@pytest.mark.precision  # with bfloat16 the bench also times the bf16 step
 def test_bench_learner_reports_rates_flops_and_peak(capsys):
     import torch
 

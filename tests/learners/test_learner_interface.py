@@ -37,19 +37,26 @@ from nsl.learners.cem import active_actions
 from nsl.learners.iql import expectile_loss
 
 ASSET = Path(nsl.__file__).parent / "assets" / "base"
-# The seeded fine-tune's weights, recorded on each CPU the suite runs on: oneDNN picks its float32 convolution
-# kernels by the CPU (an AMD EPYC without bfloat16, the CI machine; an Intel Xeon with AVX-512 and AMX), and they
-# round differently.  Forcing avx2 (ATEN_CPU_CAPABILITY, ONEDNN_MAX_CPU_ISA) gives yet other digests, so the key is
-# the CPU's kernels and not one switch.  A change to the learner's numbers changes every one of them.
-FINE_TUNE_DIGESTS = {
-    "c62fa88c8d70e541c5d417725676999d4da5ab9b10a67f8441e8f589ee071556",  # AMD EPYC (AVX2, AVX-512 without BF16)
-    "cb2b4036d970cc5efa6815c934a649f3b3c093f67ff8182d8183cedb59ca9392",  # Intel Xeon with AVX-512 BF16 and AMX
+# Numbers recorded with the code before the learner interface existed (QT-Opt's update called directly by the loop).
+# They are sums and norms compared to a relative 1e-5, not digests: oneDNN picks its float32 kernels by the CPU
+# (AVX2, AVX-512, AMX), and they round the last bits differently, so a digest of the weights holds on one CPU
+# family only.  These numbers agree to about 1e-8 between the AVX2 and the AMX kernels (ONEDNN_MAX_CPU_ISA=AVX2
+# ATEN_CPU_CAPABILITY=avx2 against the default on an Intel Xeon), while any change to the learner's arithmetic
+# (the loss, its terms, the target, the optimiser) moves them by far more.
+BASE_EVAL_ACTIONS = [30.71846, 26.52850, 28.94779, 24.41150, 24.55628, 23.69957]  # sum |action| of each episode
+FINE_TUNE_METRICS = {  # step -> (q_loss, conservative, q/mean, q/target_mean) of the seeded fine-tune's log
+    3: (0.733902, 0.38822, 0.310758, 0.395689),
+    6: (0.681216, 0.474934, 0.36435, 0.380436),
 }
+FINE_TUNE_DISTANCE = 0.15859392  # L2 norm of the fine-tuned weights minus the base's
 
 
 def test_qtopt_numbers_do_not_move():
-    """The shipped base's evaluation and a seeded fine-tune of it, against digests recorded with the code before
-    the learner interface existed (QT-Opt's update called directly by the loop).  One thread, as recorded."""
+    """The shipped base's evaluation and a seeded fine-tune of it, against numbers recorded with the code before
+    the learner interface existed.  One thread, as recorded."""
+    import csv
+    import tempfile
+
     from nsl.collectors import parse_shift
     from nsl.eval import EvalConfig
     from nsl.eval.success import run_eval_episodes
@@ -63,19 +70,24 @@ def test_qtopt_numbers_do_not_move():
             EvalConfig(episodes=6, seed=3000, workers=1, batch=2),
             progress=False,
         )
-        actions = hashlib.sha256(b"".join(np.ascontiguousarray(e.actions).tobytes() for e in episodes))
         assert [int(e.success) for e in episodes] == [1, 1, 0, 1, 1, 1]
-        assert actions.hexdigest() == "2bc0471ec3f8e52e22ff9a73d85849a0695817a9769d7957b324fb1efac9b1d7"
+        assert [e.actions.shape for e in episodes] == [(8, 6)] * 6
+        assert [float(np.abs(e.actions).sum()) for e in episodes] == pytest.approx(BASE_EVAL_ACTIONS, rel=1e-5)
 
         cfg = TrainConfig(steps=6, seed=5, log_every=3, checkpoint_every=3)
-        import tempfile
-
         with tempfile.TemporaryDirectory() as d:
             run = train(cfg, synthetic_sampler(128, seed=1), d, init_checkpoint=ASSET, progress=False)
             config = read_config(run.checkpoint)
             config.pop("code_version")
-            weights = hashlib.sha256((run.checkpoint / "model.safetensors").read_bytes()).hexdigest()
-        assert weights in FINE_TUNE_DIGESTS, weights
+            tuned = load_checkpoint(run.checkpoint).net.state_dict()
+            with open(Path(d) / "metrics.csv") as f:
+                rows = {int(r["step"]): r for r in csv.DictReader(f)}
+        base = load_checkpoint(ASSET).net.state_dict()
+        distance = sum(float(((tuned[k].double() - base[k].double()) ** 2).sum()) for k in base) ** 0.5
+        assert distance == pytest.approx(FINE_TUNE_DISTANCE, rel=1e-5)
+        for step, expected in FINE_TUNE_METRICS.items():
+            names = ("losses/q_loss", "losses/conservative", "q/mean", "q/target_mean")
+            assert [float(rows[step][n]) for n in names] == pytest.approx(expected, rel=1e-5), step
         assert "learner" not in config["training"]  # QT-Opt's configs (and so checkpoint ids) are as before
         assert (
             hashlib.sha256(canonical_config(config)).hexdigest()

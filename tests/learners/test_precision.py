@@ -12,6 +12,7 @@ from test_resume import _Crash, _CrashingSampler
 from nsl.errors import ConfigError
 from nsl.learners import checkpoint_id, load_checkpoint, load_policy, precision, train
 
+pytestmark = pytest.mark.precision  # make test runs these again with NSL_BF16=0
 needs_bf16 = pytest.mark.skipif(not precision.bf16_supported(), reason="this CPU has no bfloat16 arithmetic")
 
 
@@ -104,3 +105,16 @@ def test_a_bf16_run_updates_with_fused_adam_and_fp32_with_torchs_default():
     net = QNetwork(NetConfig(image_size=16))
     assert Learner.create(net, 1e-3, TrainConfig(precision="bf16")).optimizer.defaults["fused"] is True
     assert Learner.create(net, 1e-3, TrainConfig()).optimizer.defaults["fused"] is None  # the loop fp32 always ran
+
+
+def test_nsl_bf16_0_makes_any_cpu_a_cpu_without_bfloat16(monkeypatch):
+    """The switch the suite runs under to check CPUs without bfloat16 (and a user's way to keep auto at fp32)."""
+    for off in ("0", "off", "False"):
+        monkeypatch.setenv(precision.BF16_ENV, off)
+        assert not precision.bf16_supported()
+        assert precision.resolve_precision("auto") == "fp32"
+        with pytest.raises(ConfigError, match="precision bf16 needs a CPU"):
+            precision.resolve_precision("bf16")
+    monkeypatch.delenv(precision.BF16_ENV)
+    monkeypatch.setattr(torch._C, "_cpu", None, raising=False)  # a torch that cannot say: no bfloat16
+    assert not precision.bf16_supported()

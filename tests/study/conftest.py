@@ -77,6 +77,44 @@ holdout = 0.25
 """
 
 
+# The fewest units that still move every kind of folder a study makes (base data, a checkpoint policy's
+# collection, a fine-tune, evaluations: 7 units).  The cluster's fault tests (a lost node, a killed driver, the S3
+# store) run it; the mini plan's every experiment runs on the cluster once, uninterrupted.
+MICRO_PLAN = """
+name = "micro"
+base = "ckpt:base"
+shifts = ["harsh_lighting"]
+checkpoint_every = 5
+continual = false
+curves = false
+early_stop = false
+
+[base_data]
+source = "plan"
+
+[[base_data.datasets]]
+name = "micro-base-oracle"
+policy = "oracle:0.5"
+seed = 1
+episodes = 12
+
+[collect]
+episodes = 8
+epsilon = 0.1
+seed = 5
+
+[eval]
+episodes = 4
+seed = 2000
+
+[finetune]
+tiers = [8]
+steps = 10
+seeds = [0]
+baselines = []
+"""
+
+
 # Torch threads of every mini study run: Q-values (and so the held-out TD error the records keep) are float sums
 # whose last bits depend on how many threads add them up, and earlier tests may have changed this process's count.
 STUDY_THREADS = 2
@@ -94,19 +132,46 @@ def mini_home(tmp_path_factory):
     return tmp_path_factory.mktemp("mini_home")
 
 
+@pytest.fixture(scope="session")
+def micro_plan(tmp_path_factory):
+    path = tmp_path_factory.mktemp("plans") / "micro.toml"
+    path.write_text(MICRO_PLAN)
+    return path
+
+
+@pytest.fixture(scope="session")
+def micro_home(tmp_path_factory):
+    return tmp_path_factory.mktemp("micro_home")
+
+
+@pytest.fixture
+def micro_run(micro_plan, micro_home, monkeypatch):
+    """The micro plan run once, uninterrupted, in this process (the reference of the cluster's fault tests)."""
+    from nsl.study import run_study
+
+    monkeypatch.setenv("NSL_HOME", str(micro_home))
+    if not (micro_home / "studies" / "micro" / "report.md").is_file():
+        _with_study_threads(lambda: run_study(str(micro_plan), progress=False))
+    return micro_home
+
+
+def _with_study_threads(fn):
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(STUDY_THREADS)  # as the killed run's process (OMP_NUM_THREADS): the same float sums
+    try:
+        return fn()
+    finally:
+        torch.set_num_threads(threads)
+
+
 @pytest.fixture
 def mini_run(mini_plan, mini_home, monkeypatch):
     """The mini plan run once, uninterrupted, through the real CLI (shared by the tests of this folder)."""
-    import torch
-
     from tests.conftest import run_cli
 
     monkeypatch.setenv("NSL_HOME", str(mini_home))
     if not (mini_home / "studies" / "mini" / "report.md").is_file():
-        threads = torch.get_num_threads()
-        torch.set_num_threads(STUDY_THREADS)  # as the killed run's process (OMP_NUM_THREADS): the same float sums
-        try:
-            assert run_cli("study", "run", str(mini_plan), "--quiet") == 0
-        finally:
-            torch.set_num_threads(threads)
+        assert _with_study_threads(lambda: run_cli("study", "run", str(mini_plan), "--quiet")) == 0
     return mini_home
