@@ -59,21 +59,9 @@ def test_collect_train_and_eval_write_a_few_progress_lines_each_to_a_log(capsys)
     from tests.conftest import run_cli
 
     steps = [
-        (
-            "collect",
-            "--shift",
-            "base",
-            "--episodes",
-            "24",
-            "--policy",
-            "oracle:0.5",
-            "--data",
-            "p",
-            "--batch-size",
-            "4",
-        ),  # noqa: E501
-        ("train", "--data", "p", "--steps", "40", "--name", "p", "--checkpoint-every", "20"),
-        ("eval", "--policy", "oracle:0.5", "--shift", "base", "--episodes", "30", "--workers", "1"),
+        "collect --shift base --episodes 24 --policy oracle:0.5 --data p --num-envs 4".split(),
+        "train --data p --steps 40 --name p --checkpoint-every 20".split(),
+        "eval --policy oracle:0.5 --shift base --episodes 30 --workers 1".split(),
     ]
     for argv in steps:
         assert run_cli(*argv) == 0, argv

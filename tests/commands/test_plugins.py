@@ -13,43 +13,13 @@ from pathlib import Path
 import pytest
 
 from nsl.errors import ConfigError, IncompatibleVersionError, UnknownReferenceError
+from tests.study.conftest import MICRO_PLAN
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "nsl-occluder"
 PACKAGE = {"package": "nsl-occluder", "version": "0.1.0"}
-PLAN = """
-name = "plugin"
-base = "ckpt:base"
-shifts = ["lens_occluder@2"]
-checkpoint_every = 5
-continual = false
-curves = false
-early_stop = false
-
-[base_data]
-source = "plan"
-
-[[base_data.datasets]]
-name = "plugin-base-oracle"
-policy = "oracle:0.5"
-seed = 1
-episodes = 8
-
-[collect]
-episodes = 8
-epsilon = 0.1
-seed = 5
-
-[eval]
-episodes = 4
-seed = 2000
-
-[finetune]
-tiers = [8]
-steps = 5
-seeds = [0]
-baselines = []
-"""
+# The micro study plan (base data, a collection, a fine-tune, evaluations) on the plugin's shift
+PLAN = MICRO_PLAN.replace("micro", "plugin").replace('["harsh_lighting"]', '["lens_occluder@2"]')
 
 
 @pytest.fixture(scope="module")

@@ -4,19 +4,16 @@ from __future__ import annotations
 
 import pytest
 
-# Smaller than the shipped `tiny` plan so that the end-to-end and kill tests stay within a few minutes:
-# two shifts, tiers 4/8, 10 training steps, 4 evaluation scenes, one seed, every experiment switched on.
-MINI_PLAN = """
-name = "mini"
-base = "ckpt:base"
-shifts = ["harsh_lighting", "offset_gripper"]
-checkpoint_every = 5
 
+def plan_data(name: str) -> str:
+    """A test plan's base data (12 scripted episodes named NAME-base-oracle), target collections of 8 episodes and
+    evaluations on 4 scenes."""
+    return f"""
 [base_data]
 source = "plan"
 
 [[base_data.datasets]]
-name = "mini-base-oracle"
+name = "{name}-base-oracle"
 policy = "oracle:0.5"
 seed = 1
 episodes = 12
@@ -29,7 +26,20 @@ seed = 5
 [eval]
 episodes = 4
 seed = 2000
+"""
 
+
+# Smaller than the shipped `tiny` plan so that the end-to-end and kill tests stay within a few minutes:
+# two shifts, tiers 4/8, 10 training steps, 4 evaluation scenes, one seed, every experiment switched on.
+MINI_PLAN = (
+    """
+name = "mini"
+base = "ckpt:base"
+shifts = ["harsh_lighting", "offset_gripper"]
+checkpoint_every = 5
+"""
+    + plan_data("mini")
+    + """
 [finetune]
 tiers = [4, 8]
 steps = 10
@@ -75,12 +85,14 @@ criteria = ["eval", "softopc", "auc", "td"]
 patience = 2
 holdout = 0.25
 """
+)
 
 
 # The fewest units that still move every kind of folder a study makes (base data, a checkpoint policy's
 # collection, a fine-tune, evaluations: 7 units).  The cluster's fault tests (a lost node, a killed driver, the S3
 # store) run it; the mini plan's every experiment runs on the cluster once, uninterrupted.
-MICRO_PLAN = """
+MICRO_PLAN = (
+    """
 name = "micro"
 base = "ckpt:base"
 shifts = ["harsh_lighting"]
@@ -88,31 +100,16 @@ checkpoint_every = 5
 continual = false
 curves = false
 early_stop = false
-
-[base_data]
-source = "plan"
-
-[[base_data.datasets]]
-name = "micro-base-oracle"
-policy = "oracle:0.5"
-seed = 1
-episodes = 12
-
-[collect]
-episodes = 8
-epsilon = 0.1
-seed = 5
-
-[eval]
-episodes = 4
-seed = 2000
-
+"""
+    + plan_data("micro")
+    + """
 [finetune]
 tiers = [8]
 steps = 10
 seeds = [0]
 baselines = []
 """
+)
 
 
 # Torch threads of every mini study run: Q-values (and so the held-out TD error the records keep) are float sums
@@ -120,23 +117,25 @@ baselines = []
 STUDY_THREADS = 2
 
 
+def _plan_file(tmp_path_factory, name: str, text: str):
+    path = tmp_path_factory.mktemp("plans") / f"{name}.toml"
+    path.write_text(text)
+    return path
+
+
 @pytest.fixture(scope="session")
 def mini_plan(tmp_path_factory):
-    path = tmp_path_factory.mktemp("plans") / "mini.toml"
-    path.write_text(MINI_PLAN)
-    return path
+    return _plan_file(tmp_path_factory, "mini", MINI_PLAN)
+
+
+@pytest.fixture(scope="session")
+def micro_plan(tmp_path_factory):
+    return _plan_file(tmp_path_factory, "micro", MICRO_PLAN)
 
 
 @pytest.fixture(scope="session")
 def mini_home(tmp_path_factory):
     return tmp_path_factory.mktemp("mini_home")
-
-
-@pytest.fixture(scope="session")
-def micro_plan(tmp_path_factory):
-    path = tmp_path_factory.mktemp("plans") / "micro.toml"
-    path.write_text(MICRO_PLAN)
-    return path
 
 
 @pytest.fixture(scope="session")
