@@ -11,6 +11,7 @@ Public surface (other folders and the CLI import these from ``nsl.eval`` only)::
     continual_metrics, ContinualMetrics, curve_auc                                         # continual learning
     Rate, CurveRow, PerformanceMatrix, TierRow, TierResults, read_curve, write_curve       # records
     write_report, ReportResult, tiers_table, matrix_table, plot_curve, plot_matrix, plot_tiers
+    pipe_table, draw_tiers, new_figure, save_png                                           # pieces of reports
 
 Each name is loaded from its module on first use (PEP 562), so the statistics
 and records import no simulator: ``from nsl.eval import wilson_interval``
@@ -61,8 +62,8 @@ _EXPORTS = {
         "read_eval_jsonl",
         "write_curve",
     ),
-    "report": ("ReportResult", "matrix_table", "tiers_table", "write_report"),
-    "plots": ("plot_curve", "plot_matrix", "plot_tiers"),
+    "report": ("ReportResult", "matrix_table", "pipe_table", "tiers_table", "write_report"),
+    "plots": ("draw_tiers", "new_figure", "plot_curve", "plot_matrix", "plot_tiers", "save_png"),
 }
 __all__, __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 
@@ -84,7 +85,7 @@ if TYPE_CHECKING:  # static analysers see the eager imports
         td_error,
     )
     from .paired import PairedComparison, compare_paired, mcnemar_exact, paired_difference_interval  # noqa: F401
-    from .plots import plot_curve, plot_matrix, plot_tiers  # noqa: F401
+    from .plots import draw_tiers, new_figure, plot_curve, plot_matrix, plot_tiers, save_png  # noqa: F401
     from .records import (  # noqa: F401
         CURVE_FILE,
         EARLY_STOP_FILE,
@@ -100,6 +101,6 @@ if TYPE_CHECKING:  # static analysers see the eager imports
         read_eval_jsonl,
         write_curve,
     )
-    from .report import ReportResult, matrix_table, tiers_table, write_report  # noqa: F401
+    from .report import ReportResult, matrix_table, pipe_table, tiers_table, write_report  # noqa: F401
     from .stats import SuccessRate, markdown_table, success_rate_from_outcomes, wilson_interval  # noqa: F401
     from .success import evaluate, evaluate_outcomes, run_eval_episodes  # noqa: F401

@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
@@ -31,18 +32,24 @@ CHOICE_STYLE = {
 OFFLINE_LABELS = {"softopc": "SoftOPC", "auc": "Q-ranking AUC", "td_error": "held-out TD error"}
 
 
-def _figure(width: float, height: float):
+def new_figure(width: float, height: float, dpi: float | None = DPI):
+    """A ``matplotlib.figure.Figure`` of ``width`` x ``height`` inches on its own Agg canvas: no pyplot state, and
+    the backend of whoever imported nsl (a notebook's) stays as it was (``dpi=None``: matplotlib's default)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(width, height), dpi=DPI)
+    fig = Figure(figsize=(width, height), dpi=dpi)
     FigureCanvasAgg(fig)
     return fig
 
 
-def _save(fig, path: Path) -> Path:
+def save_png(fig, path: Path, dpi: float = DPI, tight: Literal["bbox", "layout"] = "bbox") -> Path:
+    """Write ``fig`` as a PNG at ``path`` through a temporary file and a rename.  ``tight="bbox"`` crops the image
+    to what is drawn; ``"layout"`` fits the axes into the figure first and keeps the figure's size."""
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight")
+    if tight == "layout":
+        fig.tight_layout()
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight" if tight == "bbox" else None)
     atomic_write_bytes(Path(path), buf.getvalue())
     return Path(path)
 
@@ -77,7 +84,7 @@ def plot_curve(
     """
     rows = sorted(rows, key=lambda r: r.step)
     offline = [c for c in ("softopc", "auc", "td_error") if any(r.value(c) is not None for r in rows)]
-    fig = _figure(7.5, 4.2 + 1.5 * len(offline))
+    fig = new_figure(7.5, 4.2 + 1.5 * len(offline))
     axes = fig.subplots(
         1 + len(offline), 1, sharex=True, squeeze=False, gridspec_kw={"height_ratios": [3] + [1] * len(offline)}
     )[:, 0]
@@ -116,14 +123,14 @@ def plot_curve(
     if _use_log_x(steps_all):
         axes[0].set_xscale("symlog", linthresh=max(1.0, float(np.min(steps_all[steps_all > 0]))))
     axes[-1].set_xlabel("gradient steps")
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def plot_matrix(matrix: PerformanceMatrix, path: Path, title: str = "Performance matrix") -> Path:
     """Heatmap of R[stage, task] in percent, the number written in each cell."""
     R = np.array([[np.nan if v is None else 100 * v for v in row] for row in matrix.success], dtype=float)
     n_rows, n_cols = R.shape
-    fig = _figure(1.2 + 1.15 * n_cols, 1.0 + 0.55 * n_rows)
+    fig = new_figure(1.2 + 1.15 * n_cols, 1.0 + 0.55 * n_rows)
     ax = fig.subplots()
     im = ax.imshow(np.ma.masked_invalid(R), cmap="viridis", vmin=0, vmax=100, aspect="auto")
     cbar = fig.colorbar(im, ax=ax, fraction=0.04, pad=0.02)
@@ -145,7 +152,51 @@ def plot_matrix(matrix: PerformanceMatrix, path: Path, title: str = "Performance
     ax.set_xlabel("evaluated on task")
     ax.set_ylabel("after training stage")
     ax.set_title(title)
-    return _save(fig, path)
+    return save_png(fig, path)
+
+
+def draw_tiers(
+    ax,
+    lines: Mapping[str, Sequence[tuple[float, float, tuple[float, float] | None]]],
+    ticks: Sequence[int],
+    *,
+    bases: Mapping[str, float | None] | None = None,
+    references: Mapping[str, Sequence[tuple[float, float]]] | None = None,
+    dodge: float = 1.04,
+) -> None:
+    """Success against target attempts on ``ax``, one colour per shift (Fig. 5.6).
+
+    ``lines[shift]`` holds ``(attempts, success, 95% interval or None)`` points, drawn with error bars, each
+    line's x dodged by a factor of ``dodge`` so that the bars do not overlap; ``bases[shift]`` (the base
+    policy's success) is a dashed line and ``references[shift]`` (``(attempts, success)``, e.g. a published
+    study's figures) a dotted one, in the shift's colour.  The x axis is logarithmic with a tick at each of
+    ``ticks``; a tick at 0 (the base policy as each line's first point) makes it linear up to the smallest
+    tier (symlog), labelled "base".
+    """
+    for i, (name, pts) in enumerate(lines.items()):
+        colour = f"C{i % 10}"
+        if pts:
+            x = np.array([k for k, _, _ in pts], dtype=float) * dodge ** (i - (len(lines) - 1) / 2)
+            y = np.array([100 * v for _, v, _ in pts])
+            err = np.array([[100 * (v - ci[0]), 100 * (ci[1] - v)] if ci else [0.0, 0.0] for _, v, ci in pts]).T.clip(
+                min=0.0
+            )  # 0% or 100%: rounding below 0
+            ax.errorbar(x, y, yerr=err, fmt="o-", color=colour, capsize=3, ms=4, lw=1.5, label=name.replace("_", " "))
+        base = (bases or {}).get(name)
+        if base is not None:
+            ax.axhline(100 * base, color=colour, ls="--", lw=1, alpha=0.7)
+        reference = (references or {}).get(name)
+        if reference:
+            ax.plot([k for k, _ in reference], [100 * v for _, v in reference], ":", color=colour, alpha=0.6)
+    if 0 in ticks:
+        ax.set_xscale("symlog", linthresh=max(1, min((k for k in ticks if k > 0), default=1)))
+    else:
+        ax.set_xscale("log")
+    if ticks:
+        ax.set_xticks(ticks, ["base" if k == 0 else str(k) for k in ticks])
+    ax.set_ylim(-2, 102)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
 
 
 def plot_tiers(
@@ -155,34 +206,19 @@ def plot_tiers(
 
     The base policy (no target data) of each shift is a dashed line in the same colour.
     """
-    fig = _figure(7.0, 4.5)
+    fig = new_figure(7.0, 4.5)
     ax = fig.subplots()
-    names = list(shifts) if shifts is not None else list(tiers.rows)
-    for i, name in enumerate(names):
-        row = tiers.rows[name]
-        colour = f"C{i % 10}"
-        pts = sorted((k, v) for k, v in (row.tiers or {}).items() if v is not None)
-        if pts:
-            x = np.array([k for k, _ in pts], dtype=float) * 1.04 ** (i - (len(names) - 1) / 2)  # dodge error bars
-            y = np.array([100 * v.success_rate for _, v in pts])
-            err = np.array(
-                [
-                    [100 * (v.success_rate - v.ci[0]), 100 * (v.ci[1] - v.success_rate)] if v.ci else [0.0, 0.0]
-                    for _, v in pts
-                ]
-            ).T.clip(min=0.0)  # 0% or 100%: rounding below 0
-            ax.errorbar(x, y, yerr=err, fmt="o-", color=colour, capsize=3, ms=4, lw=1.5, label=name.replace("_", " "))
-        if row.base is not None:
-            ax.axhline(100 * row.base.success_rate, color=colour, ls="--", lw=1, alpha=0.7)
-    ax.set_xscale("log")
-    ticks = tiers.tiers
-    if ticks:
-        ax.set_xticks(ticks, [str(t) for t in ticks])
+    rows = {name: tiers.rows[name] for name in (list(shifts) if shifts is not None else list(tiers.rows))}
+    lines = {name: sorted((k, v) for k, v in (row.tiers or {}).items() if v is not None) for name, row in rows.items()}
+    draw_tiers(
+        ax,
+        {name: [(k, v.success_rate, v.ci) for k, v in pts] for name, pts in lines.items()},
+        tiers.tiers,
+        bases={name: None if row.base is None else row.base.success_rate for name, row in rows.items()},
+    )
+    if tiers.tiers:
         ax.minorticks_off()
-    ax.set_ylim(-2, 102)
     ax.set_xlabel("target attempts in the fine-tuning dataset (log scale)")
     ax.set_ylabel("success rate (%, 95% CI)")
     ax.set_title(title + " (dashed: base policy)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    return _save(fig, path)
+    return save_png(fig, path)

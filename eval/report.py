@@ -17,6 +17,7 @@ PNGs next to them, each through a temporary file and a rename.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -51,11 +52,17 @@ class ReportResult:
     sections: list[str] = field(default_factory=list)  # the record files that made it in, relative to RUN
 
 
+def pipe_table(head: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
+    """A Markdown table: the header row, its rule, then one line per row of cells."""
+    return "\n".join(
+        ["| " + " | ".join(head) + " |", "|" + "---|" * len(head), *("| " + " | ".join(r) + " |" for r in rows)]
+    )
+
+
 def tiers_table(tiers: TierResults, intervals: bool = True) -> str:
     """Table 5.2's shape: base policy, each tier, the best tier (change vs base), comparison methods."""
     ks, comps = tiers.tiers, tiers.comparison_names
-    head = ["challenge", "base", *[str(k) for k in ks], "best (change)", *comps]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    rows = []
     for name, row in tiers.rows.items():
         cells = [name.replace("_", " "), "-" if row.base is None else row.base.percent(intervals)]
         measured = {k: v for k, v in (row.tiers or {}).items() if v is not None}
@@ -69,20 +76,21 @@ def tiers_table(tiers: TierResults, intervals: bool = True) -> str:
             cells.append("-")
         comparisons = row.comparisons or {}
         cells += ["-" if comparisons.get(c) is None else comparisons[c].percent(intervals) for c in comps]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+        rows.append(cells)
+    return pipe_table(["challenge", "base", *[str(k) for k in ks], "best (change)", *comps], rows)
 
 
-def matrix_table(matrix: PerformanceMatrix, intervals: bool = True) -> str:
-    """The raw matrix: one row per stage, one column per task."""
-    lines = ["| after stage | " + " | ".join(matrix.tasks) + " |", "|---|" + "---|" * len(matrix.tasks)]
+def matrix_table(matrix: PerformanceMatrix, intervals: bool = True, pretty: bool = False) -> str:
+    """The raw matrix: one row per stage, one column per task (``pretty``: underscores in their names as spaces)."""
+
+    def name(s: str) -> str:
+        return s.replace("_", " ") if pretty else s
+
+    rows = []
     for i, stage in enumerate(matrix.stages):
-        cells = []
-        for j in range(len(matrix.tasks)):
-            r = matrix.rate(i, j)
-            cells.append("-" if r is None else r.percent(intervals))
-        lines.append(f"| {i}: {stage} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+        rates = [matrix.rate(i, j) for j in range(len(matrix.tasks))]
+        rows.append([f"{i}: {name(stage)}", *["-" if r is None else r.percent(intervals) for r in rates]])
+    return pipe_table(["after stage", *map(name, matrix.tasks)], rows)
 
 
 def _find(run: Path, name: str) -> list[Path]:

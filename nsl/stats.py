@@ -9,7 +9,8 @@
 * :func:`hierarchical_gain`: a fine-tune's gain over the base on shared scenes, for several training
   seeds within several target collections; a hierarchical paired bootstrap whose interval covers the
   expected gain over scenes, seeds and target collections (see its docstring for the few-collection
-  correction).  :func:`hierarchical_rate` is the same without a base (several seeds on the same scenes).
+  correction).  :func:`hierarchical_rate` is the same without a base (several seeds on the same scenes);
+  :func:`hierarchical_difference` compares two sides that both have several runs (``nsl compare``).
 
 Nothing here imports numpy or scipy at module level: ``import nsl`` and the catalog stay light.
 """
@@ -141,6 +142,7 @@ class HierarchicalGain:
     scenes: int
     shares: dict[str, float]
     confidence: float = 0.95
+    strata: int = 1  # shifts averaged (hierarchical_mean_gain); 1: one shift
 
     @property
     def varies(self) -> tuple[str, ...]:
@@ -153,7 +155,8 @@ class HierarchicalGain:
 
     def covers(self) -> str:
         """What the interval covers, in words: ``"scenes, 3 seeds, 2 collections"``."""
-        parts = [f"{self.scenes} scenes"]
+        parts = [f"{self.strata} shifts"] if self.strata > 1 else []
+        parts.append(f"{self.scenes} scenes")
         parts.append(f"{self.seeds} seeds" if self.seeds > 1 else "1 seed (fixed)")
         parts.append(f"{self.collections} collections" if self.collections > 1 else "1 collection (fixed)")
         return ", ".join(parts)
@@ -172,6 +175,7 @@ class HierarchicalGain:
             "scenes": self.scenes,
             "shares": dict(self.shares),
             "varies": list(self.varies),
+            **({"strata": self.strata} if self.strata > 1 else {}),
         }
 
 
@@ -216,20 +220,157 @@ def hierarchical_gain(
     )
 
 
+def hierarchical_mean_gain(
+    finetune: Any, base: Any, *, confidence: float = 0.95, n_boot: int = 2000, seed: int = 0
+) -> HierarchicalGain:
+    """The mean over strata (shifts) of :func:`hierarchical_gain`, with a bootstrap stratified by shift.
+
+    ``finetune`` is ``(shifts, collections, seeds, scenes)`` and ``base`` ``(shifts, scenes)``: each shift's
+    fine-tunes and the base on the same scene seed.  Every shift is resampled on its own (its collections'
+    deviation, its seeds), except the scenes: the shifts share one scene draw per replicate, since scene i
+    is the same objects and poses on every shift and its difficulty carries across them.  The replicate
+    is the mean of the shifts' gains.  ``shares`` splits the variance of the mean the same way.
+
+    The collections enter at the level of the mean: each shift's collections are independent of the
+    others', so the mean's collection variance is the sum of the shifts' moment estimates over shifts²,
+    and its Student-t deviation pools their degrees of freedom, shifts x (collections - 1) (five shifts
+    of two collections: 5, where one shift alone has 1), as a pooled variance estimate does when the
+    collections vary about as much on every shift.  Drawing one t(1) deviation per shift instead, or
+    taking the Welch-Satterthwaite degrees of freedom of five one-degree estimates, over-covers the mean
+    (99-100% for a nominal 95%; ``tests/test_stats_coverage.py`` measures the coverage)."""
+    import numpy as np
+
+    ft = np.asarray(finetune, dtype=np.float64)
+    b = np.asarray(base, dtype=np.float64)
+    if ft.ndim != 4 or 0 in ft.shape or b.shape != (ft.shape[0], ft.shape[3]):
+        raise ValueError(
+            f"finetune must be shaped (shifts, collections, seeds, scenes) and base (shifts, scenes); "
+            f"got {ft.shape} and {b.shape}"
+        )
+    got = hierarchical_gain_batch(
+        ft,
+        b,
+        confidence=confidence,
+        n_boot=n_boot,
+        seed=seed,
+        chunk=ft.shape[0],
+        shared_scenes=True,
+        collection_term=False,
+    )
+    k, c, s, n = ft.shape
+    reps = got["replicates"].mean(axis=0)
+    v = got["v_collections"]  # each shift's collection variance of its gain
+    if c > 1 and v.sum() > 0:
+        df = float(k * (c - 1))  # the shifts' collection variances pooled: k (c - 1) degrees of freedom
+        rng = np.random.default_rng([seed, 1])
+        reps = reps + rng.standard_t(df, size=reps.shape) * math.sqrt(v.sum()) / k
+    alpha = (1 - confidence) / 2
+    lo, hi = np.quantile(reps, [alpha, 1 - alpha])
+    parts = {lvl: float(got["v_" + lvl].sum()) / k**2 for lvl in ("collections", "seeds")}
+    scene_means = (ft - b[:, None, None, :]).mean(axis=(0, 1, 2))  # each scene's gain, averaged over everything
+    parts["scenes"] = float(scene_means.var(ddof=1) / n) if n > 1 else 0.0
+    total = sum(parts.values()) or 1.0
+    return HierarchicalGain(
+        float(got["mean"].mean()),
+        float(lo),
+        float(hi),
+        c,
+        s,
+        n,
+        {lvl: parts[lvl] / total for lvl in LEVELS},
+        confidence,
+        strata=k,
+    )
+
+
 def hierarchical_rate(outcomes: Any, *, confidence: float = 0.95, n_boot: int = 2000, seed: int = 0):
     """Several runs' success rate on shared scenes: :func:`hierarchical_gain` without a base, so each scene counts
     once however many runs met it."""
     return hierarchical_gain(outcomes, None, confidence=confidence, n_boot=n_boot, seed=seed)
 
 
+def hierarchical_difference(
+    a: Any, b: Any, *, confidence: float = 0.95, n_boot: int = 2000, seed: int = 0
+) -> HierarchicalGain:
+    """Success of side A minus success of side B on shared scenes, each side several runs: a paired bootstrap.
+
+    ``a`` and ``b`` are outcomes (0/1) shaped ``(collections, seeds, scenes)``, every run of both sides scored
+    on the same scenes.  The point is mean(A) - mean(B).  With one run on side B this *is*
+    :func:`hierarchical_gain` (A's gain over B).  Otherwise each replicate resamples each side as
+    :func:`hierarchical_gain` resamples its fine-tunes (seeds within collections, inflated by sqrt(S/(S-1));
+    a Student-t deviation per side for its collections), the two sides independently, then draws the scenes
+    once for both sides, so each scene keeps its pairing; the replicate is the difference of the sides'
+    means over the drawn scenes.  Sides trained on the *same* target collections are treated as independent
+    there, which widens the interval (conservative).  ``collections`` and ``seeds`` of the result are the
+    larger side's, so ``varies`` names every level resampled on either side; ``shares`` adds the two sides'
+    collection and seed variances."""
+    import numpy as np
+
+    x, y = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    if x.ndim != 3 or y.ndim != 3 or 0 in x.shape or 0 in y.shape or x.shape[2] != y.shape[2]:
+        raise ValueError(
+            f"both sides' outcomes must be shaped (collections, seeds, scenes) on the same scenes; "
+            f"got {x.shape} and {y.shape}"
+        )
+    if y.shape[:2] == (1, 1):
+        return hierarchical_gain(x, y[0, 0], confidence=confidence, n_boot=n_boot, seed=seed)
+    rng = np.random.default_rng(seed)
+    n = x.shape[2]
+
+    def side(o: Any) -> tuple[Any, float, float]:  # (replicate means per scene (n_boot, n), v_collections, v_seeds)
+        c, s, _ = o.shape
+        runs = o.mean(axis=2)
+        colls = runs.mean(axis=1)
+        within = float(((runs - colls[:, None]) ** 2).sum() / (c * (s - 1))) if s > 1 else 0.0
+        v_colls = max(float(colls.var(ddof=1)) - within / s, 0.0) / c if c > 1 else 0.0
+        counts = np.eye(s)[rng.integers(0, s, size=(n_boot, c, s))].sum(axis=2)  # (n_boot, c, s)
+        scale = math.sqrt(s / (s - 1)) if s > 1 else 0.0
+        weights = ((1.0 + scale * (counts - 1.0)) / (c * s)).reshape(n_boot, c * s)
+        return weights @ o.reshape(c * s, n), v_colls, within / (c * s)
+
+    (xa, ca, sa), (xb, cb, sb) = side(x), side(y)
+    idx = rng.integers(0, n, size=(n_boot, n))  # one scene draw for both sides
+    reps = np.take_along_axis(xa - xb, idx, axis=1).mean(axis=1)
+    for o, v, sign in ((x, ca, 1.0), (y, cb, -1.0)):
+        if o.shape[0] > 1:
+            reps += sign * rng.standard_t(o.shape[0] - 1, size=n_boot) * math.sqrt(v)
+    alpha = (1 - confidence) / 2
+    lo, hi = np.quantile(reps, [alpha, 1 - alpha])
+    scene = x.mean(axis=(0, 1)) - y.mean(axis=(0, 1))
+    parts = {"collections": ca + cb, "seeds": sa + sb, "scenes": float(scene.var(ddof=1)) / n if n > 1 else 0.0}
+    total = sum(parts.values()) or 1.0
+    return HierarchicalGain(
+        float(x.mean() - y.mean()),
+        float(lo),
+        float(hi),
+        max(x.shape[0], y.shape[0]),
+        max(x.shape[1], y.shape[1]),
+        n,
+        {lvl: parts[lvl] / total for lvl in LEVELS},
+        confidence,
+    )
+
+
 def hierarchical_gain_batch(
-    finetune: Any, base: Any | None, *, confidence: float = 0.95, n_boot: int = 2000, seed: int = 0, chunk: int = 8
+    finetune: Any,
+    base: Any | None,
+    *,
+    confidence: float = 0.95,
+    n_boot: int = 2000,
+    seed: int = 0,
+    chunk: int = 8,
+    shared_scenes: bool = False,
+    collection_term: bool = True,
 ) -> dict[str, Any]:
     """:func:`hierarchical_gain` for many independent studies at once (vectorised; the coverage test's entry).
 
     ``finetune`` is ``(studies, collections, seeds, scenes)``, ``base`` ``(studies, scenes)`` or None.
     Returns arrays over studies: ``mean``, ``low``, ``high`` and the variance shares ``collections``,
-    ``seeds``, ``scenes``.  Deterministic for a given ``seed``."""
+    ``seeds``, ``scenes``, the variance components ``v_collections``, ``v_seeds``, ``v_scenes`` and, with
+    ``shared_scenes`` (one scene draw per replicate for every study in a chunk: the studies are strata on
+    the same scenes), the ``replicates`` ``(studies, n_boot)``.  ``collection_term=False`` leaves the
+    collections' Student-t deviation out of the replicates (:func:`hierarchical_mean_gain` adds one for
+    the mean instead).  Deterministic for a given ``seed``."""
     import numpy as np
 
     ft = np.asarray(finetune, dtype=np.float64)
@@ -240,7 +381,11 @@ def hierarchical_gain_batch(
     rng = np.random.default_rng(seed)
     alpha = (1 - confidence) / 2
     k = c * s
-    out = {key: np.empty(r_all) for key in ("mean", "low", "high", *LEVELS)}
+    out: dict[str, Any] = {
+        key: np.empty(r_all) for key in ("mean", "low", "high", *LEVELS, *(f"v_{lvl}" for lvl in LEVELS))
+    }
+    if shared_scenes:
+        out["replicates"] = np.empty((r_all, n_boot))
     seed_scale = math.sqrt(s / (s - 1)) if s > 1 else 0.0
     onehot = np.eye(s)
     for start in range(0, r_all, chunk):
@@ -259,9 +404,11 @@ def hierarchical_gain_batch(
         counts = onehot[picks].sum(axis=3)  # (r, B, c, s)
         weights = (1.0 + seed_scale * (counts - 1.0)) / k
         x = np.einsum("rbk,rkn->rbn", weights.reshape(r, n_boot, k), d.reshape(r, k, n))
-        idx = rng.integers(0, n, size=(r, n_boot, n))  # scenes: one draw shared by every run and the base
+        # scenes: one draw shared by every run and the base (and, with shared_scenes, by every study)
+        idx = rng.integers(0, n, size=(1 if shared_scenes else r, n_boot, n))
+        idx = np.broadcast_to(idx, (r, n_boot, n))
         reps = np.take_along_axis(x, idx, axis=2).mean(axis=2)
-        if c > 1:
+        if c > 1 and collection_term:
             reps += rng.standard_t(c - 1, size=(r, n_boot)) * np.sqrt(v_colls)[:, None]
         lo, hi = np.quantile(reps, [alpha, 1 - alpha], axis=1)
         total = v_colls + v_seeds + v_scenes
@@ -269,4 +416,7 @@ def hierarchical_gain_batch(
         sl = slice(start, start + r)
         out["mean"][sl], out["low"][sl], out["high"][sl] = grand, lo, hi
         out["collections"][sl], out["seeds"][sl], out["scenes"][sl] = v_colls / safe, v_seeds / safe, v_scenes / safe
+        out["v_collections"][sl], out["v_seeds"][sl], out["v_scenes"][sl] = v_colls, v_seeds, v_scenes
+        if shared_scenes:
+            out["replicates"][sl] = reps
     return out

@@ -33,9 +33,11 @@ from pathlib import Path
 from typing import Any
 
 from nsl.errors import ConfigError, UnknownReferenceError, unknown
+from nsl.learners.config import FINE_TUNE_STEPS, TrainConfig
 from nsl.scenes import REPORTING_SCENES, SELECTION_SCENES
+from nsl.services.options import FeaturesConfig
 
-SHIPPED = ("tiny", "small", "full", "full-seeds", "full-sequence", "online", "paper")
+SHIPPED = ("tiny", "small", "full", "full-seeds", "full-sequence", "headline", "online", "paper")
 BASE_DATA_SOURCES = ("checkpoint", "plan")
 # Baselines that are not a fine-tuning method of their own: what each one leaves out separates a cause of the gain.
 #   scratch_target  random initialisation, trained on the target data alone (no base half)
@@ -88,9 +90,13 @@ class Eval:
 @dataclass(frozen=True)
 class Finetune:
     tiers: tuple[int, ...] = (25, 50, 100, 200, 400, 800)  # target episodes, nested first-K views
-    steps: int = 2000  # gradient steps per fine-tuning run (the fine-tuning recipe's, nsl.learners.FINE_TUNE_STEPS)
+    steps: int = FINE_TUNE_STEPS  # gradient steps per fine-tuning run (the fine-tuning recipe's)
     seeds: tuple[int, ...] = (0,)  # training seeds of the top tier and the baselines (mean over seeds, and pooled)
     tier_seeds: tuple[int, ...] | None = None  # training seeds of the lower tiers (None: the same as seeds)
+    baseline_seeds: tuple[int, ...] | None = None  # training seeds of the baselines (None: the same as seeds)
+    collections: tuple[int, ...] | None = None  # the top tier's independent target collections, by collection seed
+    # (None: collect.seed's alone); each trains every seed of the top tier, so its interval covers the data's
+    # variation as well as the seeds' and the scenes' (nsl.stats.hierarchical_gain)
     baselines: tuple[str, ...] = ("scratch", "new_head")  # trained at the top tier: methods, or STUDY_BASELINES
     cross_shift: bool = False  # evaluate the top tier's fine-tunes on every other shift too (forgetting of shifts)
     base_task: bool = False  # also fine-tune on base-task episodes the base collects (Table 5.2's validation row),
@@ -99,6 +105,15 @@ class Finetune:
     def seeds_of(self, tier: int) -> tuple[int, ...]:
         """The training seeds of a tier."""
         return self.seeds if tier == self.tiers[-1] or self.tier_seeds is None else self.tier_seeds
+
+    def seeds_of_baselines(self) -> tuple[int, ...]:
+        """The training seeds of the baselines."""
+        return self.seeds if self.baseline_seeds is None else self.baseline_seeds
+
+    def collections_of(self, collect_seed: int) -> tuple[int, ...]:
+        """The top tier's target collections by collection seed; the plan's collection (``collect_seed``) first."""
+        more = () if self.collections is None else tuple(c for c in self.collections if c != collect_seed)
+        return (collect_seed, *more)
 
 
 @dataclass(frozen=True)
@@ -111,7 +126,7 @@ class Continual:
         "offset_gripper",
     )
     episodes: int = 800  # episodes each stage's policy collects in its shift
-    steps: int = 2000  # gradient steps per stage (the fine-tuning recipe's)
+    steps: int = FINE_TUNE_STEPS  # gradient steps per stage (the fine-tuning recipe's)
     seeds: tuple[int, ...] = (0,)  # training seeds: one whole sequence each (a plan's ``seed = S`` is ``seeds = [S]``)
 
 
@@ -147,7 +162,7 @@ class Online:
     shift: str = "transparent_objects"
     rounds: int = 6  # rounds of collection and fine-tuning
     episodes: int = 800  # grasps per round (round 1's are the base policy's collection: at most collect.episodes)
-    steps: int = 2000  # gradient steps per round
+    steps: int = FINE_TUNE_STEPS  # gradient steps per round (the fine-tuning recipe's)
     ratio: float = 0.5  # target data's share of each batch in Fig. 5.10's runs
     methods: tuple[str, ...] = ("ft", "new_head")  # round 1's method (Fig. 5.10); later rounds continue with ft
     ratios: tuple[float, ...] = (0.01, 0.24, 0.44, 0.71, 0.99)  # Fig. 5.11: target shares, with ft
@@ -159,10 +174,10 @@ class Supervised:
     """The supervised features (``nsl features``): the trunk of the base's architecture trained to classify the
     train objects from rendered frames (the project's ImageNet), or a torchvision ResNet from a file."""
 
-    classes: int = 0  # train objects to tell apart (0: all 899)
-    frames: int = 24  # rendered frames per object
-    steps: int = 3000  # classifier gradient steps
-    seed: int = 0
+    classes: int = FeaturesConfig.classes  # train objects to tell apart (0: all 899)
+    frames: int = FeaturesConfig.frames  # rendered frames per object
+    steps: int = FeaturesConfig.steps  # classifier gradient steps
+    seed: int = FeaturesConfig.seed
     encoder: str | None = None  # a torchvision ResNet state dict on disk instead (e.g. ImageNet weights)
 
 
@@ -178,9 +193,13 @@ class Plan:
         "offset_gripper",
     )  # the challenge shifts (Tables 5.1 and 5.2)
     checkpoint_every: int = 500  # a killed training resumes from its last checkpoint
-    precision: str = "fp32"  # training units' arithmetic: fp32, bf16 (CPU bfloat16 autocast) or auto (bf16 if the CPU
+    precision: str = (
+        TrainConfig.precision
+    )  # training units' arithmetic: fp32, bf16 (CPU bfloat16 autocast) or auto (bf16 if the CPU
     # has it); evaluations and collections act in fp32, which is faster for CEM's one-state searches on the CPU
-    learner: str = "qtopt"  # every training unit's learner (nsl train --learner): qtopt, iql[:OPTS] or a plugin's
+    learner: str = (
+        TrainConfig.learner
+    )  # every training unit's learner (nsl train --learner): qtopt, iql[:OPTS] or a plugin's
     base_data: BaseData = field(default_factory=BaseData)
     collect: Collect = field(default_factory=Collect)
     eval: Eval = field(default_factory=Eval)
@@ -408,6 +427,15 @@ def validate(plan: Plan) -> None:
     _seeds(f.seeds, "finetune.seeds")
     if f.tier_seeds is not None:
         _seeds(f.tier_seeds, "finetune.tier_seeds")
+    if f.baseline_seeds is not None:
+        _seeds(f.baseline_seeds, "finetune.baseline_seeds")
+    if f.collections is not None:
+        _seeds(f.collections, "finetune.collections")
+        if c.seed not in f.collections:
+            raise ConfigError(
+                f"plan finetune.collections = {list(f.collections)!r} leaves out collect.seed = {c.seed}: the lower "
+                "tiers and the baselines use that collection; list it first"
+            )
     if not isinstance(f.cross_shift, bool):
         raise ConfigError(f"plan finetune.cross_shift = {f.cross_shift!r} must be true or false")
     for m in f.baselines:

@@ -69,8 +69,27 @@ def slug(shift: str) -> str:
     return shift.replace("+", "-").replace("@", "-").replace("_", "-")
 
 
-def train_tag(method: str, shift: str, episodes: int, steps: int, seed: int, prefix: str | None = None) -> str:
-    return f"{prefix or method}-{slug(shift)}-n{episodes}-k{steps}-s{seed}"
+def train_tag(
+    method: str,
+    shift: str,
+    episodes: int,
+    steps: int,
+    seed: int,
+    prefix: str | None = None,
+    collection: int | None = None,
+) -> str:
+    """A training run's tag; ``collection``: the collection seed of a target collection other than the plan's."""
+    more = "" if collection is None else f"-c{collection}"
+    return f"{prefix or method}-{slug(shift)}-n{episodes}-k{steps}-s{seed}{more}"
+
+
+def top_tier_tags(plan: Plan, shift: str) -> dict[int, list[str]]:
+    """The top tier's fine-tune tags on a shift, by target collection (collection seed -> one tag per seed)."""
+    f, primary = plan.finetune, plan.collect.seed
+    return {
+        c: [train_tag("ft", shift, f.tiers[-1], f.steps, s, collection=None if c == primary else c) for s in f.seeds]
+        for c in f.collections_of(primary)
+    }
 
 
 def online_tag(method: str, ratio: float, shift: str, round_: int, episodes: int, steps: int, seed: int) -> str:
@@ -134,15 +153,18 @@ class _Builder:
         return self.plan.base if policy == BASE_POLICY else f"ckpt:{self.study}-{policy}@latest"
 
     # -- units ---------------------------------------------------------------------------------------------------
-    def collect(self, shift: str, policy: str, episodes: int, seed: int | None = None) -> str:
+    def collect(self, shift: str, policy: str, episodes: int, seed: int | None = None, named: bool = False) -> str:
+        """A collection by ``policy`` in ``shift``; ``named``: one of the top tier's other target collections,
+        named by its seed (``collect:SHIFT:base:cSEED``)."""
         c = self.plan.collect
         deps = () if policy == BASE_POLICY else (f"train:{policy}",)
+        more = f"-c{seed}" if named else ""
         return self._add(
             Unit(
-                f"collect:{shift}:{policy}",
+                f"collect:{shift}:{policy}" + (f":c{seed}" if named else ""),
                 "collect",
                 {
-                    "dataset": f"{self.study}-{slug(shift)}-by-{slug(policy)}",
+                    "dataset": f"{self.study}-{slug(shift)}-by-{slug(policy)}{more}",
                     "shift": shift,
                     "policy": policy,
                     "policy_ref": self.ref(policy),
@@ -155,9 +177,14 @@ class _Builder:
             )
         )
 
-    def target_data(self, shift: str, episodes: int, policy: str = BASE_POLICY) -> tuple[str, int]:
-        """(collect unit, tier) for the first ``episodes`` episodes the policy collects in the shift."""
+    def target_data(
+        self, shift: str, episodes: int, policy: str = BASE_POLICY, collection: int | None = None
+    ) -> tuple[str, int]:
+        """(collect unit, tier) for the first ``episodes`` episodes the policy collects in the shift;
+        ``collection``: the seed of another of the base's target collections than the plan's."""
         size = self.plan.collect.episodes if policy == BASE_POLICY else episodes
+        if collection is not None:
+            return self.collect(shift, policy, size, seed=collection, named=True), episodes
         return self.collect(shift, policy, size), episodes
 
     def train(
@@ -318,7 +345,14 @@ class _Builder:
                     if k == top and f.cross_shift:  # the top tier on the other shifts: what it forgets of them
                         for other in p.shifts:
                             self.evaluate(tag, other)
-            for seed in f.seeds:
+            for coll in f.collections_of(p.collect.seed)[1:]:  # the top tier on independent target collections
+                for seed in f.seeds:
+                    tag = train_tag("ft", shift, top, f.steps, seed, collection=coll)
+                    data = self.target_data(shift, top, collection=coll)
+                    self.train(tag, shift, data, method="ft", init=BASE_POLICY, steps=f.steps, seed=seed)
+                    self.evaluate(tag, shift)
+                    self.evaluate(tag, "base")
+            for seed in f.seeds_of_baselines():
                 for method in (m for m in f.baselines if m != "no_target"):
                     tag = train_tag(method, shift, top, f.steps, seed)
                     self.train(
@@ -348,7 +382,7 @@ class _Builder:
                     )
                     self.evaluate(tag, "base")
         if "no_target" in f.baselines:
-            for seed in f.seeds:
+            for seed in f.seeds_of_baselines():
                 tag = no_target_tag(f.steps, seed)
                 self.train(tag, "base", None, method="ft", init=BASE_POLICY, steps=f.steps, seed=seed)
                 for shift in ["base", *p.shifts]:

@@ -129,3 +129,47 @@ def test_one_collection_covers_seeds_and_scenes_and_counts_each_scene_once():
 def test_outcomes_must_be_shaped_by_collection_seed_and_scene():
     with pytest.raises(ValueError, match="collections, seeds, scenes"):
         hierarchical_gain([[1, 0, 1]], [1, 0, 1])
+
+
+def test_the_mean_over_shifts_covers_the_mean_true_gain():
+    """The headline: the mean gain over five shifts, each with 2 collections x 4 seeds on the same 200 scenes
+    (scene i has one difficulty on every shift, plus a shift offset).  400 simulated five-shift studies
+    (seed 11): the stratified interval of ``hierarchical_mean_gain`` covers the mean of the five true gains
+    in 96.75% of them; asserted 93-99% (400 studies put about +-1 point on a coverage).  On 1,000 studies
+    it covers 96.4%, 96.7% and 96.8% with 3, 4 and 5 seeds.  Adding each shift's own t(1) collection
+    deviation instead, as one shift's interval does, covered 99.75% of these 400: too wide for the mean."""
+    from nsl.stats import hierarchical_mean_gain
+
+    rng = np.random.default_rng(11)
+    gains, offsets, seeds, n, studies = (
+        np.array([0.4, 0.8, 1.2, 0.2, 1.0]),
+        np.array([0.0, 0.3, -0.3, 0.5, -0.2]),
+        4,
+        200,
+        400,
+    )
+    x, w = np.polynomial.hermite_e.hermegauss(80)
+    w = w / w.sum()
+    spread = np.sqrt(SCENE_SD**2 + COLLECTION_SD**2 + SEED_SD**2)
+    truth = np.mean(
+        [
+            np.sum(w * _sigmoid(o + g + spread * x)) - np.sum(w * _sigmoid(o + SCENE_SD * x))
+            for g, o in zip(gains, offsets)
+        ]
+    )
+    hits = 0
+    for i in range(studies):
+        scene = rng.normal(0.0, SCENE_SD, (1, 1, 1, n)) + offsets[:, None, None, None]
+        coll = rng.normal(0.0, COLLECTION_SD, (5, COLLECTIONS, 1, 1))
+        run = rng.normal(0.0, SEED_SD, (5, COLLECTIONS, seeds, 1))
+        p = _sigmoid(scene + gains[:, None, None, None] + coll + run)
+        ft = (rng.random(p.shape) < p).astype(np.int8)
+        base = (rng.random((5, n)) < _sigmoid(scene[:, 0, 0, :])).astype(np.int8)
+        got = hierarchical_mean_gain(ft, base, n_boot=400, seed=i)
+        hits += got.low <= truth <= got.high
+        if i == 0:
+            one = [hierarchical_gain(ft[k], base[k], n_boot=400).mean for k in range(5)]
+            assert abs(got.mean - np.mean(one)) < 1e-12 and got.strata == 5
+            assert abs(sum(got.shares.values()) - 1) < 1e-9 and got.covers().startswith("5 shifts, 200 scenes")
+    coverage = hits / studies
+    assert 0.93 <= coverage <= 0.99, f"five-shift coverage {coverage:.3f}"

@@ -476,3 +476,56 @@ def wilson(k, n):
     from nsl.stats import wilson_interval
 
     return wilson_interval(k, n)
+
+
+def test_the_headline_covers_collections_seeds_and_scenes_and_judges_finding_b_against_the_source():
+    """Two shifts, 2 target collections x 3 seeds on 100 scenes with per-scene outcomes: the report's headline is
+    ``hierarchical_mean_gain`` of exactly those outcomes, its section names what it covers, and finding (b) uses
+    it against the study's binomial interval."""
+    import numpy as np
+
+    from nsl.stats import compare_intervals, hierarchical_gain, hierarchical_mean_gain
+    from nsl.study.report import headline_gain
+    from nsl.study.report.findings import study_gain_interval
+
+    rng = np.random.default_rng(7)
+
+    def cell(p):
+        o = (rng.random(100) < p).astype(int)
+        return {"successes": int(o.sum()), "episodes": 100, "outcomes": "".join(map(str, o))}
+
+    rec = records()
+    rec["plan"]["finetune"]["seeds"] = [0, 1, 2]
+    rec["plan"]["finetune"]["collections"] = [rec["plan"]["collect"]["seed"], 77]
+    levels = {
+        "harsh_lighting": (0.2, [[0.70, 0.72, 0.66], [0.60, 0.62, 0.64]]),
+        "offset_gripper": (0.75, [[0.85] * 3, [0.80] * 3]),
+    }
+    for shift, (b, colls) in levels.items():
+        rec["base_policy"][shift] = cell(b)
+        row = rec["finetune"][shift]
+        row["tiers"]["8"] = [cell(p) for p in colls[0]]
+        row["collections"] = {"77": [cell(p) for p in colls[1]]}
+    head = headline_gain(rec)
+    ft = np.array(
+        [
+            [[[ch == "1" for ch in d["outcomes"]] for d in g] for g in (r["tiers"]["8"], r["collections"]["77"])]
+            for r in rec["finetune"].values()
+        ],
+        dtype=np.int8,
+    )
+    base = np.array([[ch == "1" for ch in rec["base_policy"][s]["outcomes"]] for s in levels], dtype=np.int8)
+    want = hierarchical_mean_gain(ft, base)
+    assert (head.mean, head.low, head.high) == (want.mean, want.low, want.high)
+    assert head.mean == pytest.approx(np.mean([hierarchical_gain(ft[k], base[k]).mean for k in range(2)]))
+    assert head.covers() == "2 shifts, 100 scenes, 3 seeds, 2 collections" and head.low < head.mean < head.high
+    b = {x.key: x for x in findings(rec)}["b"]
+    assert f"mean {100 * head.mean:+.1f} points [{100 * head.low:+.1f}, {100 * head.high:+.1f}]" in b.ours
+    assert "against the study's binomial interval" in b.ours and "hierarchical, over 2 shifts" in b.ours
+    source = study_gain_interval(rec["plan"]["shifts"])
+    assert b.verdict == compare_intervals((head.mean, head.low, head.high), source)
+    text = render(rec, None, {})
+    assert "## The headline" in text and "2 independent target collections (collection seeds 5, 77)" in text
+    # a missing run's outcomes: no headline, and finding (b) falls back to the primary collection's cells
+    rec["finetune"]["offset_gripper"]["collections"]["77"][0] = c(80)
+    assert headline_gain(rec) is None and "## The headline" not in render(rec, None, {})

@@ -122,6 +122,41 @@ def test_baselines_that_separate_the_causes_cross_shift_evaluations_and_seeds():
     unit_graph(units)  # still a DAG
 
 
+def test_independent_target_collections_train_the_top_tier_seeds_and_leave_the_rest_as_it_was():
+    import pytest
+
+    from nsl.errors import ConfigError
+    from nsl.study.units import top_tier_tags
+
+    text = MINI_PLAN.replace(
+        "seeds = [0]\nbaselines", "seeds = [0, 1, 2]\nbaseline_seeds = [0]\ncollections = [5, 77]\nbaselines"
+    )
+    plan, units = _units(text)
+    _, before = _units()
+    # the plan's own collection keeps its unit, dataset and tags; the second is named by its collection seed
+    assert before["collect:harsh_lighting:base"] == units["collect:harsh_lighting:base"]
+    other = units["collect:harsh_lighting:base:c77"]
+    assert other.params["seed"] == 77 and other.params["dataset"] == "mini-harsh-lighting-by-base-c77"
+    assert other.params["episodes"] == plan.collect.episodes
+    assert before["train:ft-harsh-lighting-n8-k10-s0"] == units["train:ft-harsh-lighting-n8-k10-s0"]
+    for seed in (0, 1, 2):
+        run = units[f"train:ft-harsh-lighting-n8-k10-s{seed}-c77"]
+        assert run.params["target"]["collect"] == "collect:harsh_lighting:base:c77"
+        assert run.params["target"]["tier"] == 8 and run.params["seed"] == seed
+        assert f"eval:ft-harsh-lighting-n8-k10-s{seed}-c77:harsh_lighting" in units
+    assert top_tier_tags(plan, "harsh_lighting") == {
+        5: [f"ft-harsh-lighting-n8-k10-s{s}" for s in (0, 1, 2)],
+        77: [f"ft-harsh-lighting-n8-k10-s{s}-c77" for s in (0, 1, 2)],
+    }
+    # the lower tiers and the baselines stay on the plan's collection; the baselines keep their seeds
+    assert not any(n.startswith("train:ft-harsh-lighting-n4") and n.endswith("-c77") for n in units)
+    assert "train:scratch-harsh-lighting-n8-k10-s0" in units and "train:scratch-harsh-lighting-n8-k10-s1" not in units
+    assert "train:no_target-k10-s0" in units and "train:no_target-k10-s1" not in units
+    unit_graph(units)
+    with pytest.raises(ConfigError, match=r"collections = \[6, 77\] leaves out collect.seed = 5"):
+        _units(text.replace("collections = [5, 77]", "collections = [6, 77]"))
+
+
 def test_a_plan_saved_before_settings_were_added_is_still_the_same_plan():
     import json
 
@@ -131,7 +166,7 @@ def test_a_plan_saved_before_settings_were_added_is_still_the_same_plan():
     saved = json.loads(json.dumps(plan.to_dict()))  # as plan.json holds it
     for key in ("selection_seed",):
         saved["eval"].pop(key)
-    for key in ("tier_seeds",):
+    for key in ("tier_seeds", "baseline_seeds", "collections"):
         saved["finetune"].pop(key)
     saved["continual"]["seed"] = saved["continual"].pop("seeds")[0]  # the older form
     assert _same_plan(saved, plan)
