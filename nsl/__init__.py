@@ -3,7 +3,7 @@
 The Python API is this package's functions (``nsl.api``, loaded on first use)::
 
     nsl.collect  nsl.train  nsl.evaluate  nsl.report  nsl.continual  nsl.online  nsl.efficiency  nsl.push  nsl.pull
-    nsl.features  nsl.study_run  nsl.study_status  nsl.study_report  nsl.transfer_run  nsl.build_curriculum
+    nsl.compare  nsl.features  nsl.study_run  nsl.study_status  nsl.study_report  nsl.transfer_run  nsl.build_curriculum
     nsl.load_policy (a checkpoint from a folder, a catalog reference or the Hub, with LeRobot's select_action)
 
 with their configs (``nsl.CollectConfig``, ``nsl.TrainOptions``, ...) and the
@@ -63,6 +63,7 @@ _API = (
     "SELECTION_SCENES",
     "build_curriculum",
     "collect",
+    "compare",
     "continual",
     "efficiency",
     "evaluate",

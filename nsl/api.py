@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 from nsl import _API
 from nsl.errors import ConfigError
 from nsl.scenes import EVAL_SCENES, FINAL_REPORTING_SCENES, REPORTING_SCENES, SELECTION_SCENES  # noqa: F401  (re-exported)
+from nsl.services.compare import compare  # noqa: F401  (re-exported: nsl.compare; imports nothing heavy)
 from nsl.services.options import (
     CollectConfig,
     ContinualConfig,

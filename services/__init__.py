@@ -10,6 +10,7 @@ functions, so each action has one implementation::
     train          pre-train or fine-tune, with early stopping; register the run's checkpoints
     scoring        offline scores on held-out episodes: SoftOPC, AUC, TD error
     evaluate       success rates with intervals, stored in the catalog
+    compare        two methods' catalogued evaluations side by side: paired intervals, aggregates across shifts
     continual      a sequence of fine-tunes and its performance matrix
     efficiency     fine-tunes on each data tier
     share          push and pull, verified and catalogued

@@ -36,6 +36,7 @@ print(json.dumps({"code": code, "modules": sorted(sys.modules)}))
         ["bench", "learner", "--help"],
         ["transfer", "run", "--help"],
         ["curriculum", "--help"],
+        ["compare", "--help"],
     ],
 )
 def test_light_commands_do_not_import_heavy_libraries(argv, tmp_path):
