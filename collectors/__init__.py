@@ -4,6 +4,7 @@ Public surface (import these from ``nsl.collectors``; other folders must not
 reach into the modules)::
 
     EnvConfig, GraspEnv, ENV_VERSION            # the task
+    ENGINES                                     # EnvConfig.engine: mujoco (default) or pybullet
     SHIFT_NAMES, ShiftSpec, parse_shift, parse_shift_list   # the shift suite
     ShiftDef, register_shift, shift_names       # plugin shifts (also nsl.shifts entry points)
     STUDY_SEVERITIES, STUDY_SHIFTS              # the five at the severities calibrated to ckpt:base
@@ -40,6 +41,7 @@ _EXPORTS = {
     "parallel": ("collect_episodes",),
     "policies": ("Policy", "register_policy", "scripted_policy"),
     "rollout": ("Episode", "episode_seeds", "make_envs", "run_episodes"),
+    "world": ("ENGINES",),
     "shifts": (
         "SHIFT_NAMES",
         "SHIFTS",

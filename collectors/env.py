@@ -32,39 +32,41 @@ Control modes:
 Reward is sparse: 1 if an object's centre is above ``lift_threshold`` at the
 end of the episode, else 0 (also ``info["success"]``).
 
-Each episode compiles its own MjSpec scene (objects, colours, sizes, shift);
-that takes a few milliseconds, while the GL context is created once per
-environment.  Same seed, same episode, bit for bit.
+Engines (``EnvConfig.engine``): ``mujoco`` (the default) or ``pybullet``.  The
+episode (objects, colours, sizes, poses, the wrist's start) is drawn from the
+seed by :mod:`.world`, the same on both; this module is the task written once
+for both (control, reward, observation), over an engine's few operations
+(:mod:`.sim_mujoco`, :mod:`.sim_pybullet`).  On MuJoCo each episode compiles its
+own MjSpec scene (objects, colours, sizes, shift), which takes a few
+milliseconds, while the GL context is created once per environment.  Same
+seed, same episode, bit for bit, on either engine.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import gymnasium as gym
-import mujoco  # noqa: E402,I001
 import numpy as np
 
 from nsl import keys
 from nsl.errors import ConfigError
 from nsl.keys import ACTION_DIM, STATE_DIM  # noqa: F401  (re-exported by nsl.collectors)
 
-from . import objects as objlib  # noqa: E402
-from .render import SceneRenderer  # sets MUJOCO_GL before mujoco is imported
-from .scene import (  # noqa: E402
-    BIN_HALF,
+from . import objects as objlib
+from .shifts import ShiftSpec, parse_shift
+from .world import (
     CAMERAS,
+    ENGINES,
     FINGER_OPEN,
-    START_Z,
     WORKSPACE_HALF,
     WRIST_Z_RANGE,
     ObjectSpec,
-    build_spec,
+    draw_episode,
     finger_tip_offset,
 )
-from .shifts import ShiftSpec, parse_shift  # noqa: E402
 
 ENV_VERSION = "nsl-grasp-v3"  # v2: 6-d gripper state, camera framed on the bin; v3: wrist camera, 7 cm jaw
 CONTROL_MODES = ("auto_descent", "full")
@@ -93,8 +95,11 @@ class EnvConfig:
     settle_steps: int = 80  # physics steps for dropped objects to come to rest before the first frame
     lift_threshold: float = 0.10  # object centre height (m) above the table that counts as lifted
     grasp_clearance: float = 0.002  # finger-tip height above the floor at the bottom of a descent (m)
+    engine: str = ENGINES[0]  # the physics engine and renderer: "mujoco" or "pybullet"
 
     def __post_init__(self) -> None:
+        if self.engine not in ENGINES:
+            raise ConfigError(f"engine {self.engine!r} is unknown; use one of {', '.join(ENGINES)}")
         if self.control not in CONTROL_MODES:
             raise ConfigError(f"control mode {self.control!r} is unknown; use one of {CONTROL_MODES}")
         if self.camera not in CAMERAS:
@@ -111,7 +116,7 @@ class EnvConfig:
             raise ConfigError(f"object split {self.split!r} is not one of {objlib.SPLITS}")
         if self.substeps < 1:
             raise ConfigError(f"substeps {self.substeps} must be at least 1")
-        _ = self.shift_spec  # validates the shift name and severity
+        self.shift_spec.require_engine(self.engine)  # validates the shift names and severities, and their engine
 
     @property
     def shift_spec(self) -> ShiftSpec:
@@ -126,6 +131,8 @@ class EnvConfig:
         d["object_size"] = list(self.object_size)
         d["shift_spec"] = self.shift_spec.to_dict()
         d["env_version"] = ENV_VERSION
+        if d["engine"] == ENGINES[0]:
+            del d["engine"]  # absent means mujoco: configs (and dataset hashes) made before the option hold
         return d
 
     @classmethod
@@ -137,28 +144,8 @@ class EnvConfig:
         return cls(**kw)
 
 
-def _random_colour(rng: np.random.Generator) -> tuple[float, float, float, float]:
-    h, s, v = rng.uniform(0, 1), rng.uniform(0.35, 0.9), rng.uniform(0.35, 0.95)
-    i = int(h * 6) % 6
-    f = h * 6 - int(h * 6)
-    p, q, t = v * (1 - s), v * (1 - f * s), v * (1 - (1 - f) * s)
-    r, g, b = [(v, t, p), (q, v, p), (p, v, t), (p, q, v), (t, p, v), (v, p, q)][i]
-    return (float(r), float(g), float(b), 1.0)
-
-
-@dataclass
-class _Handles:
-    """Indices into the compiled model, looked up once per episode."""
-
-    qpos: dict[str, int] = field(default_factory=dict)
-    act: dict[str, int] = field(default_factory=dict)
-    object_bodies: list[int] = field(default_factory=list)
-    object_qpos: list[int] = field(default_factory=list)
-    object_geoms: list[int] = field(default_factory=list)
-
-
 class GraspEnv(gym.Env):
-    """Bin grasping with a parallel-jaw gripper, rendered by MuJoCo."""
+    """Bin grasping with a parallel-jaw gripper, simulated and rendered by MuJoCo or PyBullet."""
 
     # One frame per control step, at the nominal control rate that datasets record (nsl.keys.FPS).
     metadata = {"render_modes": ["rgb_array"], "render_fps": keys.FPS}
@@ -166,7 +153,7 @@ class GraspEnv(gym.Env):
     def __init__(
         self,
         config: EnvConfig | None = None,
-        renderer: SceneRenderer | None = None,
+        renderer: Any = None,
         render_mode: str | None = None,
         obs_type: str = "image_state",
         **overrides: Any,
@@ -192,91 +179,46 @@ class GraspEnv(gym.Env):
             }
         )
         self.action_space = gym.spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
-        if renderer is not None and (renderer.height, renderer.width) != (n, n):
-            raise ConfigError(f"shared renderer is {renderer.height}x{renderer.width} but image_size is {n}")
-        self._owns_renderer = renderer is None
-        self._renderer: SceneRenderer | None = SceneRenderer(n, n) if renderer is None else renderer
+        self._sim = _make_sim(config, renderer)
         self._object_ids = objlib.object_ids(config.split)
-        self.model: mujoco.MjModel | None = None
-        self.data: mujoco.MjData | None = None
         self._objects: list[ObjectSpec] = []
         self._t = 0
         self._done = True
         self._tip = finger_tip_offset()
+        self._target: np.ndarray = np.zeros(4)
+        self._fingers = FINGER_OPEN
+        self._tip_below_wrist = self._tip
 
-    # -- episode construction -------------------------------------------------
-    def _sample_objects(self, rng: np.random.Generator) -> list[ObjectSpec]:
-        c = self.config
-        n = int(rng.integers(c.min_objects, c.max_objects + 1))
-        ids = rng.choice(len(self._object_ids), size=n, replace=False)
-        spread = BIN_HALF - 0.045
-        out: list[ObjectSpec] = []
-        placed: list[tuple[float, float, float]] = []  # x, y, radius of objects already placed
-        for idx in ids:
-            mesh = objlib.load_mesh(self._object_ids[int(idx)])
-            size = rng.uniform(*c.object_size)
-            scale = objlib.scale_for(mesh, size)
-            radius = 0.5 * float(np.linalg.norm(mesh.extents * scale))
-            q = rng.normal(size=4)
-            q /= np.linalg.norm(q)
-            # Drop each object just above the floor where it overlaps no other object
-            # (a short fall settles fast); if the bin is too crowded, stack it above.
-            x, y = rng.uniform(-spread, spread, 2)
-            z = radius + 0.002
-            for _ in range(20):
-                if all((x - px) ** 2 + (y - py) ** 2 > (radius + pr) ** 2 for px, py, pr in placed):
-                    break
-                x, y = rng.uniform(-spread, spread, 2)
-            else:
-                z = radius + 0.002 + 2 * max(pr for _, _, pr in placed) * len(placed)
-            placed.append((float(x), float(y), radius))
-            out.append(
-                ObjectSpec(
-                    mesh_id=self._object_ids[int(idx)],
-                    scale=(float(scale[0]), float(scale[1]), float(scale[2])),
-                    rgba=_random_colour(rng),
-                    pos=(float(x), float(y), float(z)),
-                    quat=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
-                )
-            )
-        return out
+    @property
+    def engine(self) -> str:
+        return self.config.engine
+
+    @property
+    def model(self) -> Any:
+        """MuJoCo's compiled model of this episode (None on other engines, or before reset())."""
+        return getattr(self._sim, "model", None)
+
+    @property
+    def data(self) -> Any:
+        """MuJoCo's ``MjData`` of this episode (None on other engines, or before reset())."""
+        return getattr(self._sim, "data", None)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        rng = self.np_random
-        self._objects = self._sample_objects(rng)
-        if self._renderer is None:
-            raise RuntimeError("reset() called on a closed environment; make a new one")
-        if self.model is not None:
-            self._renderer.release(self.model)
-        spec = build_spec(self._objects, self.shift, self.config.image_size)
-        self.model = m = spec.compile()
-        self.data = d = mujoco.MjData(m)
-        h = self._h = _Handles()
-        for j in ("wrist_x", "wrist_y", "wrist_z", "wrist_yaw", "finger_left", "finger_right"):
-            h.qpos[j] = int(m.joint(j).qposadr[0])
-        for a in ("act_x", "act_y", "act_z", "act_yaw", "act_finger_left", "act_finger_right"):
-            h.act[a] = m.actuator(a).id
-        h.object_bodies = [m.body(f"object{i}").id for i in range(len(self._objects))]
-        h.object_qpos = [int(m.joint(f"object{i}_joint").qposadr[0]) for i in range(len(self._objects))]
-        h.object_geoms = [m.geom(f"object{i}").id for i in range(len(self._objects))]
-        # Lowest finger point below the wrist in this (possibly shifted) model.
-        fl = m.geom("finger_left")
-        self._tip_below_wrist = -(float(fl.pos[2]) - float(fl.size[2]))
-
+        c = self.config
+        episode = draw_episode(self.np_random, self._object_ids, (c.min_objects, c.max_objects), c.object_size)
+        self._objects = list(episode.objects)
+        sim = self._sim
+        sim.build(episode, self.shift)
+        self._tip_below_wrist = sim.tip_below_wrist
         # Start pose: wrist high above a random point near the bin centre, fingers open.
-        start = np.array(
-            [rng.uniform(-0.06, 0.06), rng.uniform(-0.06, 0.06), START_Z, rng.uniform(-math.pi / 2, math.pi / 2)]
-        )
+        start = np.array(episode.start)
         self._target = start.copy()
         self._fingers = FINGER_OPEN
-        for j, v in zip(("wrist_x", "wrist_y", "wrist_z", "wrist_yaw"), start):
-            d.qpos[h.qpos[j]] = v
-        d.qpos[h.qpos["finger_left"]] = d.qpos[h.qpos["finger_right"]] = FINGER_OPEN
-        self._apply_ctrl()
-        # Let the dropped objects settle in the bin.
-        mujoco.mj_step(m, d, self.config.settle_steps)
-        self._descent = (start[2] - self._grasp_wrist_z()) / self.config.steps
+        sim.set_joints(start, FINGER_OPEN)
+        sim.set_targets(self._target, self._fingers)
+        sim.step(c.settle_steps)  # let the dropped objects settle in the bin
+        self._descent = (start[2] - self._grasp_wrist_z()) / c.steps
         self._t = 0
         self._done = False
         return self._observe(), self._info(success=False)
@@ -284,14 +226,6 @@ class GraspEnv(gym.Env):
     # -- control ----------------------------------------------------------------
     def _grasp_wrist_z(self) -> float:
         return max(WRIST_Z_RANGE[0], self._tip + self.config.grasp_clearance)
-
-    def _apply_ctrl(self) -> None:
-        d, h = self.data, self._h
-        assert d is not None  # reset() built the model
-        x, y, z, yaw = self._target
-        d.ctrl[h.act["act_x"]], d.ctrl[h.act["act_y"]], d.ctrl[h.act["act_z"]] = x, y, z
-        d.ctrl[h.act["act_yaw"]] = yaw
-        d.ctrl[h.act["act_finger_left"]] = d.ctrl[h.act["act_finger_right"]] = self._fingers
 
     def _move_to(self, target: np.ndarray, steps: int) -> None:
         """Drive the wrist to ``target`` over ``steps`` physics steps.
@@ -302,41 +236,34 @@ class GraspEnv(gym.Env):
         without integrating physics.  Near the objects the actuator targets
         are interpolated and the physics is stepped.
         """
-        m, d = self.model, self.data
-        assert d is not None  # reset() built the model
+        sim = self._sim
         if self._free_space(self._target) and self._free_space(target):
             self._target = target.copy()
-            for j, v in zip(("wrist_x", "wrist_y", "wrist_z", "wrist_yaw"), target):
-                d.qpos[self._h.qpos[j]] = v
-            d.qvel[:] = 0.0
-            self._apply_ctrl()
-            mujoco.mj_forward(m, d)
+            sim.place(self._target, self._fingers)
             return
         start = self._target.copy()
         chunks = max(1, steps // 5)
         for k in range(1, chunks + 1):
             self._target = start + (target - start) * (k / chunks)
-            self._apply_ctrl()
-            mujoco.mj_step(m, d, steps // chunks)
+            sim.set_targets(self._target, self._fingers)
+            sim.step(steps // chunks)
 
     def _free_space(self, pose: np.ndarray) -> bool:
         """True when the finger tips at wrist pose ``pose`` are clear above every object."""
-        assert self.model is not None and self.data is not None  # reset() built the model
-        tops = self.data.xpos[self._h.object_bodies, 2] + self.model.geom_rbound[self._h.object_geoms]
-        return bool(pose[2] - self._tip_below_wrist > tops.max() + 0.02)
+        return bool(pose[2] - self._tip_below_wrist > self._sim.object_tops().max() + 0.02)
 
     def _grasp_and_lift(self, close: bool = True) -> None:
-        m, d = self.model, self.data
+        sim = self._sim
         if close:
             for k in range(1, 6):  # close gradually so the object is centred, not flicked out
                 self._fingers = FINGER_OPEN * (1 - k / 5)
-                self._apply_ctrl()
-                mujoco.mj_step(m, d, 14)
-            mujoco.mj_step(m, d, 25)
+                sim.set_targets(self._target, self._fingers)
+                sim.step(14)
+            sim.step(25)
         lift = self._target.copy()
         lift[2] = self._grasp_wrist_z() + 0.14
         self._move_to(lift, 80)
-        mujoco.mj_step(m, d, 20)
+        sim.step(20)
 
     def step(self, action: np.ndarray):
         if self._done:
@@ -355,7 +282,7 @@ class GraspEnv(gym.Env):
             target[2] = self._grasp_wrist_z() if last else max(self._grasp_wrist_z(), target[2] - self._descent)
             self._move_to(target, c.substeps * (2 if last else 1))
             if last:
-                mujoco.mj_step(self.model, self.data, 15)  # settle at grasp height
+                self._sim.step(15)  # settle at grasp height
                 self._grasp_and_lift(close=True)
                 terminated = grasp = True
         else:
@@ -372,40 +299,34 @@ class GraspEnv(gym.Env):
 
     # -- reading the state ------------------------------------------------------
     def _lifted(self) -> bool:
-        assert self.data is not None  # reset() built the model
-        heights = self.data.xpos[self._h.object_bodies, 2]
+        heights = self._sim.object_poses()[0][:, 2]
         return bool((heights > self.config.lift_threshold).any())
 
     def _observe(self) -> dict[str, np.ndarray]:
         return {self._image_key: self.render(), self._state_key: self.gripper_state()}
 
     def gripper_state(self) -> np.ndarray:
-        d, h = self.data, self._h
-        if d is None:
+        if not self._objects:
             raise RuntimeError("gripper_state() called before reset()")
-        opening = 0.5 * (d.qpos[h.qpos["finger_left"]] + d.qpos[h.qpos["finger_right"]]) / FINGER_OPEN
+        x, y, z, yaw, left, right = self._sim.joints()
+        opening = 0.5 * (left + right) / FINGER_OPEN
         z0, z1 = WRIST_Z_RANGE
-        height = (d.qpos[h.qpos["wrist_z"]] - z0) / (z1 - z0)
-        x, y = (d.qpos[h.qpos[j]] / WORKSPACE_HALF for j in ("wrist_x", "wrist_y"))
-        yaw = d.qpos[h.qpos["wrist_yaw"]]
+        height = (z - z0) / (z1 - z0)
+        x, y = x / WORKSPACE_HALF, y / WORKSPACE_HALF
         return np.clip(np.array([opening, height, x, y, math.sin(yaw), math.cos(yaw)], dtype=np.float32), -1.0, 1.0)
 
     def render(self) -> np.ndarray:
-        if self._renderer is None:
-            raise RuntimeError("render() called on a closed environment")
-        return self._renderer.render(self.model, self.data, self.config.camera)
+        return self._sim.render(self.config.camera)
 
     def _info(self, success: bool) -> dict[str, Any]:
         return {"success": bool(success), "step": self._t, "num_objects": len(self._objects)}
 
     def privileged_state(self) -> dict[str, np.ndarray]:
         """Ground truth for scripted policies: gripper pose and object poses and shapes."""
-        d, h = self.data, self._h
-        if d is None:
+        if not self._objects:
             raise RuntimeError("privileged_state() called before reset()")
-        gripper = np.array([d.qpos[h.qpos[j]] for j in ("wrist_x", "wrist_y", "wrist_z", "wrist_yaw")])
-        pos = d.xpos[h.object_bodies].copy()
-        mats = d.xmat[h.object_bodies].reshape(-1, 3, 3)
+        gripper = self._sim.joints()[:4]
+        pos, mats = self._sim.object_poses()
         # Each object's narrowest horizontal direction (where a parallel jaw should close).
         grasp_yaw, width = [], []
         angles = np.linspace(0, math.pi, 36, endpoint=False)
@@ -422,22 +343,28 @@ class GraspEnv(gym.Env):
             "object_pos": pos,
             "object_grasp_yaw": np.array(grasp_yaw),
             "object_width": np.array(width),
-            "finger_offset": self._finger_offset(),
+            "finger_offset": self._sim.finger_offset(),
         }
-
-    def _finger_offset(self) -> np.ndarray:
-        """Offset of the finger mount from the wrist in the hand frame (the offset shift moves it)."""
-        assert self.model is not None  # reset() built the model
-        return np.array(self.model.body("finger_mount").pos[:2])
 
     @property
     def objects(self) -> list[ObjectSpec]:
         return list(self._objects)
 
     def close(self) -> None:
-        if self._renderer is not None:
-            if self._owns_renderer:
-                self._renderer.close()
-            elif self.model is not None:
-                self._renderer.release(self.model)
-            self._renderer = None
+        self._sim.close()
+
+
+def _make_sim(config: EnvConfig, renderer: Any) -> Any:
+    """The engine's simulator; ``renderer`` (a MuJoCo ``SceneRenderer``) shares one GL context among environments."""
+    if config.engine == "mujoco":
+        from .sim_mujoco import MujocoSim
+
+        n = config.image_size
+        if renderer is not None and (renderer.height, renderer.width) != (n, n):
+            raise ConfigError(f"shared renderer is {renderer.height}x{renderer.width} but image_size is {n}")
+        return MujocoSim(n, renderer)
+    if renderer is not None:
+        raise ConfigError(f"a shared renderer draws MuJoCo scenes; pass renderer=None with engine {config.engine!r}")
+    from .sim_pybullet import PybulletSim
+
+    return PybulletSim(config.image_size)

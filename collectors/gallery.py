@@ -19,6 +19,7 @@ def render_gallery(
     image_size: int = 64,
     scale: int = 3,
     split: str = "train",
+    engine: str = "mujoco",
 ) -> Path:
     """Write a grid with one row per shift and one column per episode.
 
@@ -28,16 +29,18 @@ def render_gallery(
     """
     from PIL import Image, ImageDraw
 
-    renderer = SceneRenderer(image_size, image_size)
+    configs = [EnvConfig(shift=spec.name, image_size=image_size, split=split, engine=engine) for spec in shifts]
+    renderer = SceneRenderer(image_size, image_size) if engine == "mujoco" else None  # one GL context for all rows
     rows = []
     try:
-        for spec in shifts:
-            env = GraspEnv(EnvConfig(shift=spec.name, image_size=image_size, split=split), renderer=renderer)
+        for config in configs:
+            env = GraspEnv(config, renderer=renderer)
             frames = [env.reset(seed=seed + k)[0]["image"] for k in range(episodes)]
             env.close()
             rows.append(np.concatenate(frames, axis=1))
     finally:
-        renderer.close()
+        if renderer is not None:
+            renderer.close()
     grid = np.concatenate(rows, axis=0)
     img = Image.fromarray(grid).resize((grid.shape[1] * scale, grid.shape[0] * scale), Image.Resampling.NEAREST)
     label_w = 170

@@ -23,8 +23,9 @@ from nsl.progress import progress_bar
 from . import objects as objlib
 from .env import EnvConfig
 from .render import SceneRenderer
-from .scene import BIN_HALF, FINGER_OPEN, ObjectSpec, build_spec
+from .scene import build_spec
 from .shifts import parse_shift
+from .world import BIN_HALF, FINGER_OPEN, ObjectSpec
 
 CAMERA_HEIGHT = (0.15, 0.30)  # wrist heights the frames are taken from (metres)
 

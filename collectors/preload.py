@@ -5,7 +5,7 @@ object mesh, so a new worker starts in milliseconds instead of re-importing
 and re-parsing (no GL context exists before the fork; each worker makes its own).
 """
 
-from . import env  # noqa: F401  (imports mujoco with MUJOCO_GL set)
+from . import sim_mujoco  # noqa: F401  (imports mujoco with MUJOCO_GL set)
 from .objects import SPLITS, load_mesh, object_ids
 
 for _split in SPLITS:

@@ -16,7 +16,6 @@ import numpy as np
 
 from .env import EnvConfig, GraspEnv
 from .policies import Policy
-from .render import SceneRenderer
 
 
 @dataclass(frozen=True)
@@ -118,7 +117,11 @@ def _run_batch(envs: list[GraspEnv], policy: Policy, indices: list[int], seed: i
 
 
 def make_envs(config: EnvConfig, count: int) -> list[GraspEnv]:
-    """``count`` environments sharing one renderer (one GL context per process)."""
+    """``count`` environments; on MuJoCo they share one renderer (one GL context per process)."""
+    if config.engine != "mujoco":
+        return [GraspEnv(config) for _ in range(count)]
+    from .render import SceneRenderer
+
     renderer = SceneRenderer(config.image_size, config.image_size)
     return [GraspEnv(config, renderer=renderer) for _ in range(count)]
 

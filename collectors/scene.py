@@ -17,59 +17,59 @@ stiff position control, objects normalised to graspable sizes.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
 from .objects import load_mesh
 from .shifts import ShiftSpec
+from .world import (  # the engine-neutral geometry; also read from here by older code
+    ARM_FROM_TO,
+    ARM_RADIUS,
+    ARM_RGBA,
+    BIN_HALF,
+    BIN_WALL_H,
+    BIN_WALL_T,
+    CAMERAS,
+    DARK_RGBA,
+    FINGER_HALF,
+    FINGER_OPEN,
+    FINGER_TOP,
+    FLANGE_HALF_HEIGHT,
+    FLANGE_RADIUS,
+    FLANGE_Z,
+    FLOOR_RGBA,
+    MAX_OBJECTS,
+    METAL_RGBA,
+    OBJECT_MASS,
+    PALM_HALF,
+    PALM_Z,
+    SHOULDER_CAM_FOVY,
+    SHOULDER_CAM_POS,
+    SHOULDER_CAM_TARGET,
+    START_Z,
+    TABLE_RGBA,
+    TIMESTEP,
+    WALL_RGBA,
+    WORKSPACE_HALF,
+    WRIST_CAM_FOVY,
+    WRIST_CAM_POS,
+    WRIST_CAM_TARGET,
+    WRIST_HALF_HEIGHT,
+    WRIST_RADIUS,
+    WRIST_Z_RANGE,
+    ObjectSpec,
+    finger_tip_offset,
+    look_at,
+)
 
-# Geometry (metres).  The table top is z = 0.
-BIN_HALF = 0.15  # inner half-width of the bin
-BIN_WALL_H = 0.06
-BIN_WALL_T = 0.01
-FINGER_HALF = (0.006, 0.014, 0.03)  # finger box half sizes: thickness, width, length
-PALM_Z = -0.035  # palm centre below the wrist
-FINGER_TOP = -0.045  # where fingers attach, below the wrist
-FINGER_OPEN = 0.035  # each finger's distance from centre when open (7 cm opening)
-WRIST_Z_RANGE = (0.095, 0.34)  # wrist height limits
-START_Z = 0.25  # wrist height at the start of an episode
-WORKSPACE_HALF = 0.13  # wrist x/y limits
-TIMESTEP = 0.002
-WRIST_CAM_POS = (0.0, -0.085, -0.05)  # wrist camera, in the wrist frame
-WRIST_CAM_TARGET = (0.0, 0.0, -0.13)  # the point it looks at: the floor below the fingers at the last step
-WRIST_CAM_FOVY = 65.0
-CAMERAS = ("wrist", "shoulder")  # names of the scene's cameras; EnvConfig.camera picks one
-MAX_OBJECTS = 5
-
-
-@dataclass(frozen=True)
-class ObjectSpec:
-    """One object of an episode: which mesh, how large, what colour, where."""
-
-    mesh_id: int
-    scale: tuple[float, float, float]  # per-axis mesh scale
-    rgba: tuple[float, float, float, float]
-    pos: tuple[float, float, float]
-    quat: tuple[float, float, float, float]
-
-
-def finger_tip_offset() -> float:
-    """Distance from the wrist down to the finger tips (base gripper)."""
-    return -(FINGER_TOP - 2 * FINGER_HALF[2])
+__all__ = ["CAMERAS", "ObjectSpec", "START_Z", "build_spec", "finger_tip_offset"]
 
 
 def _look_at_quat(pos: np.ndarray, target: np.ndarray) -> list[float]:
     """Camera quaternion looking from pos to target with world z up."""
-    fwd = target - pos
-    fwd /= np.linalg.norm(fwd)
-    right = np.cross(fwd, [0.0, 0.0, 1.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, fwd)
-    mat = np.stack([right, up, -fwd], axis=1)  # camera looks along -z
     quat = np.zeros(4)
-    mujoco.mju_mat2Quat(quat, mat.flatten())
+    mujoco.mju_mat2Quat(quat, look_at(pos, target).flatten())
     return quat.tolist()
 
 
@@ -103,14 +103,14 @@ def build_spec(objects: list[ObjectSpec], shift: ShiftSpec, image_size: int = 64
         type=box,
         size=[0.5, 0.5, 0.02],
         pos=[0, 0, -0.0205],
-        rgba=[0.55, 0.42, 0.3, 1],
+        rgba=list(TABLE_RGBA),
         contype=0,
         conaffinity=0,
     )
     # The bin floor is a plane: for collisions a half-space, so nothing can tunnel through it.
-    spec.add_material(name="bin_floor", rgba=[0.42, 0.44, 0.47, 1])
+    spec.add_material(name="bin_floor", rgba=list(FLOOR_RGBA))
     world.add_geom(name="bin_floor", type=plane, size=[BIN_HALF, BIN_HALF, 0.01], pos=[0, 0, 0.0], material="bin_floor")
-    wall = [0.62, 0.64, 0.68, 1]
+    wall = list(WALL_RGBA)
     for i, (x, y, hx, hy) in enumerate(
         [
             (BIN_HALF + BIN_WALL_T, 0, BIN_WALL_T, BIN_HALF + 2 * BIN_WALL_T),
@@ -123,11 +123,13 @@ def build_spec(objects: list[ObjectSpec], shift: ShiftSpec, image_size: int = 64
             name=f"bin_wall{i}", type=box, size=[hx, hy, BIN_WALL_H / 2], pos=[x, y, BIN_WALL_H / 2], rgba=wall
         )
 
-    # Framed on the bin, so that at 64x64 an object covers tens of pixels rather than a few; the
-    # gripper leaves the top of the frame when it is high and near the back wall.
-    cam_pos = np.array([0.0, -0.20, 0.34])
+    # Framed on the bin; the gripper leaves the top of the frame when it is high and near the back wall.
+    cam_pos = np.array(SHOULDER_CAM_POS)
     world.add_camera(
-        name="shoulder", pos=cam_pos.tolist(), quat=_look_at_quat(cam_pos, np.array([0.0, 0.01, 0.0])), fovy=48.0
+        name="shoulder",
+        pos=cam_pos.tolist(),
+        quat=_look_at_quat(cam_pos, np.array(SHOULDER_CAM_TARGET)),
+        fovy=SHOULDER_CAM_FOVY,
     )
 
     _add_gripper(spec, image_size)
@@ -148,7 +150,7 @@ def build_spec(objects: list[ObjectSpec], shift: ShiftSpec, image_size: int = 64
 def _add_gripper(spec: mujoco.MjSpec, image_size: int = 64) -> None:
     slide, hinge = mujoco.mjtJoint.mjJNT_SLIDE, mujoco.mjtJoint.mjJNT_HINGE
     box, cyl, cap = mujoco.mjtGeom.mjGEOM_BOX, mujoco.mjtGeom.mjGEOM_CYLINDER, mujoco.mjtGeom.mjGEOM_CAPSULE
-    metal, dark = [0.75, 0.75, 0.78, 1], [0.15, 0.15, 0.17, 1]
+    metal, dark = list(METAL_RGBA), list(DARK_RGBA)
 
     wrist = spec.worldbody.add_body(name="wrist", pos=[0, 0, 0], gravcomp=1.0)
     for axis_name, axis, rng in (("x", [1, 0, 0], WORKSPACE_HALF), ("y", [0, 1, 0], WORKSPACE_HALF)):
@@ -168,7 +170,7 @@ def _add_gripper(spec: mujoco.MjSpec, image_size: int = 64) -> None:
     wrist.add_geom(
         name="wrist_geom",
         type=cyl,
-        size=[0.022, 0.015, 0],
+        size=[WRIST_RADIUS, WRIST_HALF_HEIGHT, 0],
         pos=[0, 0, 0.0],
         rgba=dark,
         contype=0,
@@ -178,9 +180,9 @@ def _add_gripper(spec: mujoco.MjSpec, image_size: int = 64) -> None:
     wrist.add_geom(
         name="arm_link",
         type=cap,
-        fromto=[0, 0, 0.015, 0.16, 0.22, 0.40],
-        size=[0.022, 0, 0],
-        rgba=[0.9, 0.55, 0.1, 1],
+        fromto=[*ARM_FROM_TO[0], *ARM_FROM_TO[1]],
+        size=[ARM_RADIUS, 0, 0],
+        rgba=list(ARM_RGBA),
         contype=0,
         conaffinity=0,
         mass=0.01,
@@ -207,8 +209,8 @@ def _add_gripper(spec: mujoco.MjSpec, image_size: int = 64) -> None:
     hand.add_geom(
         name="flange",
         type=cyl,
-        size=[0.018, 0.008, 0],
-        pos=[0, 0, -0.022],
+        size=[FLANGE_RADIUS, FLANGE_HALF_HEIGHT, 0],
+        pos=[0, 0, FLANGE_Z],
         rgba=metal,
         mass=0.1,
         contype=0,
@@ -226,9 +228,7 @@ def _add_gripper(spec: mujoco.MjSpec, image_size: int = 64) -> None:
         mass=0.01,
     )
     mount = hand.add_body(name="finger_mount", pos=[0, 0, 0], gravcomp=1.0)
-    mount.add_geom(
-        name="palm", type=box, size=[FINGER_OPEN + 0.012, 0.016, 0.008], pos=[0, 0, PALM_Z], rgba=metal, mass=0.15
-    )
+    mount.add_geom(name="palm", type=box, size=list(PALM_HALF), pos=[0, 0, PALM_Z], rgba=metal, mass=0.15)
     fh = FINGER_HALF
     for side, sign in (("left", -1.0), ("right", 1.0)):
         f = mount.add_body(name=f"finger_{side}_body", pos=[0, 0, 0], gravcomp=1.0)
@@ -284,7 +284,7 @@ def _add_object(spec: mujoco.MjSpec, i: int, obj: ObjectSpec) -> None:
         type=mujoco.mjtGeom.mjGEOM_MESH,
         meshname=f"mesh{i}",
         rgba=list(obj.rgba),
-        mass=0.08,
+        mass=OBJECT_MASS,
         friction=[1.0, 0.01, 0.001],
         condim=4,
     )

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -39,6 +39,23 @@ class ShiftDef:
     apply: Callable[[mujoco.MjSpec, dict[str, float]], None]
     doc: str
     plugin: dict[str, str] | None = None  # the package and version of a plugin shift (None: built into nsl)
+    # The same edit on the other engines, by engine name: {"pybullet": apply(scene, params)}, where scene is
+    # the PyBullet scene's description before it is built (collectors/sim_pybullet.py, BulletScene).
+    engine_applies: Mapping[str, Callable[[Any, dict[str, float]], None]] = field(
+        default_factory=dict, hash=False, compare=False
+    )
+
+    def apply_for(self, engine: str) -> Callable[[Any, dict[str, float]], None]:
+        """The edit of ``engine``'s scene; a shift without one fails in one line naming what to add."""
+        if engine == "mujoco":
+            return self.apply
+        found = self.engine_applies.get(engine)
+        if found is None:
+            raise ConfigError(
+                f"shift {self.name!r} has no apply for engine {engine!r}; give its ShiftDef "
+                f"engine_applies={{{engine!r}: apply(scene, params)}} (docs/extending.md), or use engine 'mujoco'"
+            )
+        return found
 
 
 def _harsh_lighting_params(s: float) -> dict[str, float]:
@@ -270,6 +287,10 @@ class Shift:
     def apply(self, spec: mujoco.MjSpec) -> None:
         SHIFTS[self.name].apply(spec, self.params)
 
+    def apply_to(self, engine: str, scene: Any) -> None:
+        """Edit ``engine``'s scene (MuJoCo: the ``MjSpec``) with this shift's parameters."""
+        SHIFTS[self.name].apply_for(engine)(scene, self.params)
+
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"name": self.name, "severity": float(self.severity), "params": self.params}
         plugin = SHIFTS[self.name].plugin
@@ -291,6 +312,16 @@ class ShiftSpec:
     def apply(self, spec: mujoco.MjSpec) -> None:
         for s in self.shifts:
             s.apply(spec)
+
+    def apply_to(self, engine: str, scene: Any) -> None:
+        """Edit ``engine``'s scene with each shift in turn."""
+        for s in self.shifts:
+            s.apply_to(engine, scene)
+
+    def require_engine(self, engine: str) -> None:
+        """Fail in one line if a shift has no apply for ``engine``."""
+        for s in self.shifts:
+            SHIFTS[s.name].apply_for(engine)
 
     def to_dict(self) -> dict[str, Any]:
         return {"version": SHIFT_SPEC_VERSION, "name": self.name, "shifts": [s.to_dict() for s in self.shifts]}

@@ -149,7 +149,7 @@ class Collection:
             if _content_spec(last["spec"]) != _content_spec(spec) or parent.image_size != image_size:
                 raise ConfigError(
                     f"dataset {parent.ref} was collected with other settings ({_spec_summary(last['spec'])}, "
-                    f"{parent.image_size}px); appending needs the same shift, policy, seed and image size, "
+                    f"{parent.image_size}px); appending needs the same shift, engine, policy, seed and image size, "
                     f"or choose a new --dataset name"
                 )
             episodes_per_file = int(parent.provenance.get("episodes_per_file", episodes_per_file))
@@ -341,7 +341,8 @@ def _load_plan(staging: Path) -> dict[str, Any] | None:
 
 def _spec_summary(spec: dict[str, Any]) -> str:
     env = spec.get("env", {})
-    return f"shift {env.get('shift', '?')}, policy {spec.get('policy_ref', '?')}, seed {spec.get('seed', '?')}"
+    engine = f", engine {env['engine']}" if "engine" in env else ""  # absent: mujoco, as before the option
+    return f"shift {env.get('shift', '?')}{engine}, policy {spec.get('policy_ref', '?')}, seed {spec.get('seed', '?')}"
 
 
 def unfinished() -> list[dict[str, Any]]:

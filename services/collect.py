@@ -54,7 +54,7 @@ def collect(
 
     from .refs import policy_factory
 
-    env_config = EnvConfig(shift=cfg.shift, split=cfg.split, image_size=cfg.image_size)
+    env_config = EnvConfig(shift=cfg.shift, split=cfg.split, image_size=cfg.image_size, engine=cfg.engine)
     make_policy = policy_factory(
         cfg.policy, env_config, epsilon=cfg.epsilon, action_noise=cfg.action_noise, precision=cfg.precision
     )
@@ -159,7 +159,7 @@ def _collect(
 def _argv(cfg: CollectConfig) -> list[str]:
     out = []
     for k, v in asdict(cfg).items():
-        if (k == "action_noise" and not v) or (k == "precision" and v == "fp32"):
+        if (k == "action_noise" and not v) or (k == "precision" and v == "fp32") or (k == "engine" and v == "mujoco"):
             continue  # options added later: commands without them are recorded as before
         out += [f"--{k.replace('_', '-')}", str(v)]
     return out

@@ -25,6 +25,8 @@ from nsl.learners.config import (
 )
 
 PRECISIONS = ("fp32", "bf16", "auto")  # nsl.learners.precision.PRECISIONS (that module loads torch)
+ENGINES = ("mujoco", "pybullet")  # nsl.collectors.ENGINES (that package loads gymnasium)
+ENGINE_HELP = "physics engine and renderer: mujoco or pybullet (the same task, objects and scenes per seed)"
 METHOD_HELP = (
     "ft = fine-tune all parameters of --init (the study's method); scratch = random init; "
     "new_head = parent's trunk, re-initialised head; new_head_frozen = the same with the trunk frozen "
@@ -71,6 +73,7 @@ class CollectConfig:
         "the CPU has it); recorded in the dataset",
         choices=PRECISIONS,
     )
+    engine: str = option("mujoco", ENGINE_HELP + "; recorded in the dataset", choices=ENGINES)
 
     def __post_init__(self) -> None:
         for name in ("shift", "episodes", "policy", "data"):

@@ -44,6 +44,7 @@ CLOSED = {
     "split": {"train", "test"},
     "criterion": {"eval", "softopc", "auc", "td"},
     "precision": {"fp32", "bf16", "auto"},
+    "engine": {"mujoco", "pybullet"},
 }
 
 
@@ -110,6 +111,10 @@ def test_closed_sets_match_the_libraries():
     from nsl.services.options import PRECISIONS as OPTION_PRECISIONS
 
     assert OPTION_PRECISIONS == PRECISIONS
+    from nsl.collectors import ENGINES
+    from nsl.services.options import ENGINES as OPTION_ENGINES
+
+    assert OPTION_ENGINES == ENGINES
 
 
 CONFIGURED = [(p, parser) for p, parser in PARSERS if parser.get_default("config") is not None]

@@ -90,7 +90,8 @@ def _show(args: argparse.Namespace) -> int:
         env, spec = c["spec"]["env"], c["spec"]
         print(
             f"collection    episodes {c['episodes'][0]}..{c['episodes'][1] - 1}: shift {env['shift']} "
-            f"({env['env_version']}, {env['split']} objects), policy {spec['policy_ref']}, seed {spec['seed']}"
+            f"({env['env_version']}, {env.get('engine', 'mujoco')}, {env['split']} objects), "
+            f"policy {spec['policy_ref']}, seed {spec['seed']}"
         )
     print(
         f"created       {created.get('time')} by nsl {created.get('code_version')} "

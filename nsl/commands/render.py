@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from nsl.commands._options import add_parser, add_seed
+from nsl.services.options import ENGINE_HELP, ENGINES
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -27,6 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scale", type=int, default=3, help="upscaling factor for viewing")
     add_seed(p, help="scene seed: column i shows scene (seed, i)")
     p.add_argument("--split", default="train", choices=["train", "test"], help="object split")
+    p.add_argument("--engine", default=ENGINES[0], choices=ENGINES, help=ENGINE_HELP)
     p.add_argument("--out", type=Path, default=Path("gallery.png"), help="output PNG")
     p.set_defaults(func=run)
 
@@ -46,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
         image_size=args.image_size,
         scale=args.scale,
         split=args.split,
+        engine=args.engine,
     )
     print(f"wrote {out} ({len(shifts)} rows x {args.episodes} episodes)")
     return 0
