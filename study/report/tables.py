@@ -329,26 +329,32 @@ def findings_table(items: Sequence[Finding]) -> str:
 
 def headline_table(records: Mapping[str, Any]) -> str:
     """The top tier's gain on each shift and their mean, each with its hierarchical interval (over target
-    collections, training seeds and scenes, each scene paired with the base) and the variance shares; empty
-    without per-scene outcomes."""
+    collections, training seeds and scenes, each scene paired with the base) and the variance shares.  A shift
+    whose runs are not all measured with per-scene outcomes has a row saying so, and the mean waits for every
+    shift; empty when no shift is measured."""
     top = str(records["plan"]["finetune"]["tiers"][-1])
-    head = headline_gain(records)
-    if head is None:
-        return ""
-    rows = []
+    rows, measured = [], 0
     for shift in records["finetune"]:
-        g, b0 = shift_gain(records, shift), count(records["base_policy"][shift])
-        shares = ", ".join(f"{100 * g.shares[lvl]:.0f}%" for lvl in ("collections", "seeds", "scenes"))  # type: ignore
+        g, b0 = shift_gain(records, shift), count(records["base_policy"].get(shift))
+        if g is None or b0 is None:
+            rows.append([pretty(shift), "-" if b0 is None else f"{100 * b0.rate:.1f}%", "-", "not measured yet", "-"])
+            continue
+        measured += 1
+        shares = ", ".join(f"{100 * g.shares[lvl]:.0f}%" for lvl in ("collections", "seeds", "scenes"))
         rows.append(
             [
                 pretty(shift),
-                f"{100 * b0.rate:.1f}%",  # type: ignore[union-attr]
-                f"{100 * (b0.rate + g.mean):.1f}%",  # type: ignore[union-attr]
-                f"{100 * g.mean:+.1f} [{100 * g.low:+.1f}, {100 * g.high:+.1f}]",  # type: ignore[union-attr]
+                f"{100 * b0.rate:.1f}%",
+                f"{100 * (b0.rate + g.mean):.1f}%",
+                f"{100 * g.mean:+.1f} [{100 * g.low:+.1f}, {100 * g.high:+.1f}] ({g.covers()})",
                 shares,
             ]
         )
-    rows.append(["**mean over shifts**", "", "", f"**{headline_text(head)}**", ""])
+    if not measured:
+        return ""
+    head = headline_gain(records)
+    mean = f"**{headline_text(head)}**" if head is not None else f"waits for every shift ({measured} of {len(rows)})"
+    rows.append(["**mean over shifts**", "", "", mean, ""])
     return pipe_table(
         [
             "shift",

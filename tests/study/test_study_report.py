@@ -485,7 +485,7 @@ def test_the_headline_covers_collections_seeds_and_scenes_and_judges_finding_b_a
     import numpy as np
 
     from nsl.stats import compare_intervals, hierarchical_gain, hierarchical_mean_gain
-    from nsl.study.report import headline_gain
+    from nsl.study.report import headline_gain, shift_gain
     from nsl.study.report.findings import study_gain_interval
 
     rng = np.random.default_rng(7)
@@ -526,6 +526,14 @@ def test_the_headline_covers_collections_seeds_and_scenes_and_judges_finding_b_a
     assert b.verdict == compare_intervals((head.mean, head.low, head.high), source)
     text = render(rec, None, {})
     assert "## The headline" in text and "2 independent target collections (collection seeds 5, 77)" in text
-    # a missing run's outcomes: no headline, and finding (b) falls back to the primary collection's cells
+    # a missing run's outcomes: no headline mean, that shift's row says so, the measured shift keeps its row
     rec["finetune"]["offset_gripper"]["collections"]["77"][0] = c(80)
-    assert headline_gain(rec) is None and "## The headline" not in render(rec, None, {})
+    text = render(rec, None, {})
+    harsh = shift_gain(rec, "harsh_lighting")
+    assert headline_gain(rec) is None and "waits for every shift (1 of 2)" in text
+    assert f"{100 * harsh.mean:+.1f} [{100 * harsh.low:+.1f}, {100 * harsh.high:+.1f}] (100 scenes" in text
+    offset = next(line for line in text.splitlines() if line.startswith("| offset gripper |") and "measured" in line)
+    assert offset.endswith("| - | not measured yet | - |")
+    for row in rec["finetune"].values():  # no outcomes at all: no headline section
+        row["tiers"]["8"] = [c(70)] * 3
+    assert "## The headline" not in render(rec, None, {})
