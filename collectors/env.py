@@ -100,6 +100,14 @@ class EnvConfig:
     def __post_init__(self) -> None:
         if self.engine not in ENGINES:
             raise ConfigError(f"engine {self.engine!r} is unknown; use one of {', '.join(ENGINES)}")
+        named = parse_shift(self.shift)  # a shift may name its engine (engine:pybullet+...): it moves to `engine`
+        if named.engine != ENGINES[0]:
+            if self.engine not in (ENGINES[0], named.engine):
+                raise ConfigError(
+                    f"shift {self.shift!r} is on engine {named.engine!r}, but engine is {self.engine!r}; give one"
+                )
+            object.__setattr__(self, "engine", named.engine)
+            object.__setattr__(self, "shift", named.shifts_name)
         if self.control not in CONTROL_MODES:
             raise ConfigError(f"control mode {self.control!r} is unknown; use one of {CONTROL_MODES}")
         if self.camera not in CAMERAS:
@@ -120,7 +128,8 @@ class EnvConfig:
 
     @property
     def shift_spec(self) -> ShiftSpec:
-        return parse_shift(self.shift)
+        """The shifts on this config's engine (its name is the task's: ``engine:pybullet+...`` off MuJoCo)."""
+        return parse_shift(self.shift, engine=self.engine)
 
     @property
     def steps(self) -> int:

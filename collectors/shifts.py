@@ -24,8 +24,11 @@ import numpy as np
 
 from nsl.errors import ConfigError, IncompatibleVersionError, unknown
 
+from .world import ENGINES
+
 SHIFT_SPEC_VERSION = 1
 BASE = "base"
+ENGINE_TOKEN = "engine:"  # a spec's part naming its engine, e.g. engine:pybullet+harsh_lighting: the engine as a shift
 
 
 @dataclass(frozen=True)
@@ -58,6 +61,9 @@ class ShiftDef:
         return found
 
 
+ROOM_LIGHT = 0.5  # the diffuse intensity of the scene's ceiling light (collectors/scene.py)
+
+
 def _harsh_lighting_params(s: float) -> dict[str, float]:
     return {"intensity": 10.0 * s, "elevation_deg": 12.0, "azimuth_deg": 35.0, "ambient_scale": 1.0 - 0.6 * min(s, 1.0)}
 
@@ -83,6 +89,19 @@ def _apply_harsh_lighting(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
             lt.diffuse = (np.asarray(lt.diffuse) * p["ambient_scale"]).tolist()
 
 
+def _harsh_lighting_pybullet(scene: Any, p: dict[str, float]) -> None:
+    # TinyRenderer has one directional light and no spotlight.  The closest honest version: that light comes
+    # from the halogen lamp's elevation and azimuth, brighter by the lamp's intensity over the room light's
+    # (diffuse and specular x (1 + intensity / 0.5)), and the ambient light dims as MuJoCo's room light does.
+    # What differs: the whole scene is lit from the side, not a patch under a cone.
+    el, az = math.radians(p["elevation_deg"]), math.radians(p["azimuth_deg"])
+    scene.light_direction = (math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el))
+    gain = 1.0 + p["intensity"] / ROOM_LIGHT
+    scene.diffuse *= gain
+    scene.specular *= gain
+    scene.ambient *= p["ambient_scale"]
+
+
 def _checkerboard_params(s: float) -> dict[str, float]:
     return {"square_cm": 2.54, "contrast": min(1.0, s)}
 
@@ -101,11 +120,32 @@ def _apply_checkerboard(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
     mat = spec.material("bin_floor")
     mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "checker"
     mat.texuniform = False
-    # The floor plane is 30 cm wide; one repeat of the builtin checker spans four squares
-    # across it (measured from renders), so 2.95 repeats give twelve one-inch squares.
-    reps = 0.30 / (4.0 * p["square_cm"] / 100.0)
+    # The floor plane is 30 cm wide and one repeat of the builtin checker is 2 x 2 squares, so these 2.95
+    # repeats draw 5.9 squares across it: squares of 5.1 cm, twice the `square_cm` the params record (the
+    # renders show it; kept as it is, since the calibrated severity and every dataset were made with it).
+    reps = _checker_repeats(p["square_cm"])
     mat.texrepeat = [reps, reps]
     mat.rgba = [1, 1, 1, 1]
+
+
+def checkerboard_image(contrast: float, pixels_per_square: int = 8) -> np.ndarray:
+    """One tile of a black/white checkerboard, 2 x 2 squares (uint8 RGB) of grey levels 0.5 +- 0.5 * contrast:
+    MuJoCo's builtin checker texture."""
+    light, dark = (round(255 * (0.5 + sign * 0.5 * contrast)) for sign in (1, -1))
+    board = np.where(np.indices((2, 2)).sum(axis=0) % 2 == 0, light, dark).astype(np.uint8)
+    return np.repeat(np.repeat(board, pixels_per_square, axis=0), pixels_per_square, axis=1)[..., None].repeat(3, -1)
+
+
+def _checker_repeats(square_cm: float) -> float:
+    """How many times the 2 x 2 checker tile repeats across the 30 cm floor (MuJoCo's ``texrepeat``)."""
+    return 0.30 / (4.0 * square_cm / 100.0)
+
+
+def _checkerboard_pybullet(scene: Any, p: dict[str, float]) -> None:
+    # The same tile repeated as often across the bin's floor as on MuJoCo.
+    scene.floor_texture = checkerboard_image(p["contrast"])
+    scene.floor_texture_repeats = _checker_repeats(p["square_cm"])
+    scene.floor_rgba = (1.0, 1.0, 1.0, 1.0)
 
 
 def _transparent_params(s: float) -> dict[str, float]:
@@ -118,6 +158,15 @@ def _apply_transparent(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
             g.rgba = [0.85, 0.9, 0.92, p["opacity"]]  # clear plastic: pale, see-through
             if g.material:
                 g.material = ""
+
+
+def _transparent_pybullet(scene: Any, p: dict[str, float]) -> None:
+    # TinyRenderer draws every triangle opaque (it ignores alpha).  The closest honest version: each object is
+    # drawn in the colour clear plastic shows over the bin's floor, opacity x pale + (1 - opacity) x floor,
+    # shaded by its own surface, so its outline and shading stay while its colour all but vanishes.  What
+    # differs: nothing behind an object shows through it (a finger, another object, a wall).
+    scene.object_rgba = [(0.85, 0.9, 0.92, 1.0) for _ in scene.object_rgba]
+    scene.object_opacity = p["opacity"]
 
 
 def _extend_params(s: float) -> dict[str, float]:
@@ -142,6 +191,15 @@ def _apply_extend(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
         g.solref = [0.02 / p["stiffness_scale"], 1.0]  # less compliant
 
 
+def _extend_pybullet(scene: Any, p: dict[str, float]) -> None:
+    # The same longer, narrower fingers.  Their stiffness has no counterpart: Bullet's contacts are rigid
+    # constraints already (MuJoCo's soft contacts get a shorter time constant).
+    ext = p["extension_cm"] / 100.0
+    thick, width, length = scene.finger_half
+    scene.finger_half = (thick, width * p["width_scale"], length + ext / 2.0)
+    scene.finger_z -= ext / 2.0
+
+
 def _offset_params(s: float) -> dict[str, float]:
     return {"offset_cm": 10.0 * s}
 
@@ -157,6 +215,12 @@ def _apply_offset(spec: mujoco.MjSpec, p: dict[str, float]) -> None:
     bracket.pos = [0.0, half, -0.012]
 
 
+def _offset_pybullet(scene: Any, p: dict[str, float]) -> None:
+    # The same lateral offset of the finger mount; the builder draws the bracket that joins it to the flange.
+    x, y, z = scene.mount_offset
+    scene.mount_offset = (x, y + p["offset_cm"] / 100.0, z)
+
+
 SHIFTS: dict[str, ShiftDef] = {
     d.name: d
     for d in [
@@ -168,6 +232,7 @@ SHIFTS: dict[str, ShiftDef] = {
             _apply_harsh_lighting,
             "a bright low spotlight skims the bin: intensity 10 at severity 1 (the room light is 0.5), "
             "12 deg elevation",
+            engine_applies={"pybullet": _harsh_lighting_pybullet},
         ),
         ShiftDef(
             "checkerboard_backing",
@@ -175,7 +240,8 @@ SHIFTS: dict[str, ShiftDef] = {
             1.0,
             _checkerboard_params,
             _apply_checkerboard,
-            "a black/white checkerboard with one-inch squares under the bin; severity is contrast",
+            "a black/white checkerboard under the bin (5.1 cm squares); severity is contrast",
+            engine_applies={"pybullet": _checkerboard_pybullet},
         ),
         ShiftDef(
             "transparent_objects",
@@ -184,6 +250,7 @@ SHIFTS: dict[str, ShiftDef] = {
             _transparent_params,
             _apply_transparent,
             "objects become clear plastic: opacity 1 - 0.85*severity (0.15 at severity 1)",
+            engine_applies={"pybullet": _transparent_pybullet},
         ),
         ShiftDef(
             "extend_gripper",
@@ -192,6 +259,7 @@ SHIFTS: dict[str, ShiftDef] = {
             _extend_params,
             _apply_extend,
             "fingers 1 cm longer per unit severity, narrower and stiffer",
+            engine_applies={"pybullet": _extend_pybullet},
         ),
         ShiftDef(
             "offset_gripper",
@@ -200,6 +268,7 @@ SHIFTS: dict[str, ShiftDef] = {
             _offset_params,
             _apply_offset,
             "fingers offset laterally from the controlled wrist by 10 cm per unit severity",
+            engine_applies={"pybullet": _offset_pybullet},
         ),
     ]
 }
@@ -299,15 +368,34 @@ class Shift:
 
 @dataclass(frozen=True)
 class ShiftSpec:
-    """An ordered composition of shifts; empty means the base task."""
+    """An ordered composition of shifts on an engine; no shifts on MuJoCo is the base task.
+
+    The engine is part of the name when it is not MuJoCo, so that an engine reads as one more shift wherever
+    shifts are named (tables, the catalog, ``--shift``): ``engine:pybullet`` is the base task on PyBullet,
+    ``engine:pybullet+harsh_lighting@2`` a shift on it.
+    """
 
     shifts: tuple[Shift, ...] = field(default_factory=tuple)
+    engine: str = ENGINES[0]
+
+    def __post_init__(self) -> None:
+        if self.engine not in ENGINES:
+            raise ConfigError(f"engine {self.engine!r} is unknown; use one of {', '.join(ENGINES)}")
 
     @property
     def name(self) -> str:
-        if not self.shifts:
-            return BASE
-        return "+".join(s.name if s.severity == 1.0 else f"{s.name}@{s.severity:g}" for s in self.shifts)
+        parts = [f"{ENGINE_TOKEN}{self.engine}"] if self.engine != ENGINES[0] else []
+        parts += [s.name if s.severity == 1.0 else f"{s.name}@{s.severity:g}" for s in self.shifts]
+        return "+".join(parts) or BASE
+
+    @property
+    def shifts_name(self) -> str:
+        """The name of the shifts alone, without the engine (``base`` if none)."""
+        return ShiftSpec(self.shifts).name
+
+    def on(self, engine: str) -> ShiftSpec:
+        """The same shifts on ``engine``."""
+        return ShiftSpec(self.shifts, engine)
 
     def apply(self, spec: mujoco.MjSpec) -> None:
         for s in self.shifts:
@@ -324,7 +412,8 @@ class ShiftSpec:
             SHIFTS[s.name].apply_for(engine)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"version": SHIFT_SPEC_VERSION, "name": self.name, "shifts": [s.to_dict() for s in self.shifts]}
+        d = {"version": SHIFT_SPEC_VERSION, "name": self.name, "shifts": [s.to_dict() for s in self.shifts]}
+        return d if self.engine == ENGINES[0] else {**d, "engine": self.engine}  # absent: MuJoCo, as before engines
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), sort_keys=True)
@@ -340,7 +429,7 @@ class ShiftSpec:
         from nsl import plugins
 
         plugins.require(plugins.recorded(d), f"shift {d.get('name')!r}")
-        return cls(tuple(Shift(s["name"], float(s["severity"])) for s in d["shifts"]))
+        return cls(tuple(Shift(s["name"], float(s["severity"])) for s in d["shifts"]), d.get("engine", ENGINES[0]))
 
     @classmethod
     def from_json(cls, text: str) -> ShiftSpec:
@@ -350,16 +439,26 @@ class ShiftSpec:
         return self.name
 
 
-def parse_shift(text: str, severity: float | None = None) -> ShiftSpec:
-    """Parse ``NAME[@SEVERITY][+NAME[@SEVERITY]...]``; ``base`` is no shift.
+def parse_shift(text: str, severity: float | None = None, engine: str | None = None) -> ShiftSpec:
+    """Parse ``NAME[@SEVERITY][+NAME[@SEVERITY]...]``; ``base`` is no shift, ``engine:NAME`` the engine.
 
-    ``severity`` (from ``--severity``) applies to every part that gives none.
+    ``severity`` (from ``--severity``) applies to every part that gives none, and ``engine`` (from
+    ``--engine``; default MuJoCo) to a spec that names none.
     """
     text = (text or "").strip()
     if not text:
         raise ConfigError("empty shift name; use one of " + ", ".join(shift_names()))
     parts = []
+    named_engine = None
     for token in text.split("+"):
+        if token.strip().startswith(ENGINE_TOKEN):
+            value = token.strip()[len(ENGINE_TOKEN) :]
+            if value not in ENGINES:
+                raise ConfigError(f"engine {value!r} in shift {text!r} is unknown; use one of {', '.join(ENGINES)}")
+            if named_engine is not None and value != named_engine:
+                raise ConfigError(f"shift {text!r} names two engines; name one (engine:{'|engine:'.join(ENGINES)})")
+            named_engine = value
+            continue
         name, _, sev = token.strip().partition("@")
         if name == BASE:
             continue
@@ -373,14 +472,18 @@ def parse_shift(text: str, severity: float | None = None) -> ShiftSpec:
         else:
             value = 1.0 if severity is None else float(severity)
         parts.append(Shift(name, value))
-    return ShiftSpec(tuple(parts))
+    if engine is not None and named_engine is not None and engine != named_engine and engine != ENGINES[0]:
+        raise ConfigError(f"shift {text!r} is on engine {named_engine!r}, but engine {engine!r} was asked; give one")
+    return ShiftSpec(tuple(parts), named_engine or engine or ENGINES[0])
 
 
-def parse_shift_list(text: str, severity: float | None = None) -> list[ShiftSpec]:
+def parse_shift_list(text: str, severity: float | None = None, engine: str | None = None) -> list[ShiftSpec]:
     """Parse a comma-separated list of shift specs; ``all`` is base plus the five shifts at severity 1 (or
-    ``severity``), ``study`` is base plus the five at their calibrated severities (:data:`STUDY_SEVERITIES`)."""
+    ``severity``), ``study`` is base plus the five at their calibrated severities (:data:`STUDY_SEVERITIES`).
+    ``engine`` applies to every spec that names none."""
     if text.strip() == "all":
-        return [parse_shift(n, severity) for n in SHIFT_NAMES]
+        return [parse_shift(n, severity, engine) for n in SHIFT_NAMES]
     if text.strip() == "study":
-        return [parse_shift(BASE)] + [parse_shift(n) for n in STUDY_SHIFTS]
-    return [parse_shift(t, severity) for t in text.split(",") if t.strip()] or [parse_shift("", severity)]
+        return [parse_shift(BASE, engine=engine)] + [parse_shift(n, engine=engine) for n in STUDY_SHIFTS]
+    specs = [parse_shift(t, severity, engine) for t in text.split(",") if t.strip()]
+    return specs or [parse_shift("", severity, engine)]

@@ -28,6 +28,7 @@ import math
 import os
 import sys
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -76,6 +77,7 @@ MOTOR_FORCES = (60.0, 60.0, 60.0, 40.0, 12.0, 12.0)
 POSITION_GAINS = (0.2, 0.2, 0.2, 0.3, 0.1, 0.1)  # Bullet's position motors: how much of the error each step removes
 SOLVER_ITERATIONS = 50
 NEAR, FAR = 0.01, 3.0  # the cameras' clipping planes (m)
+_TEXTURES: dict[str, Path] = {}  # the PNG written for each texture image, once per process
 
 
 @dataclass
@@ -84,6 +86,9 @@ class BulletScene:
 
     object_rgba: list[tuple[float, float, float, float]]
     floor_rgba: tuple[float, float, float, float] = FLOOR_RGBA
+    floor_texture: np.ndarray | None = None  # an RGB image (uint8) tiled over the bin's floor, tinted by floor_rgba
+    floor_texture_repeats: float = 1.0  # how many times it repeats across the floor in each direction
+    object_opacity: float = 1.0  # below 1, objects are drawn in their colour blended with the floor's (no alpha here)
     # TinyRenderer's one light: the direction towards it, its colour and the shading coefficients.
     light_direction: tuple[float, float, float] = (0.1, -0.2, 1.0)
     light_colour: tuple[float, float, float] = (1.0, 1.0, 1.0)
@@ -198,7 +203,7 @@ class PybulletSim:
         self.gripper = self._build_gripper(scene)
         self.bodies = []
         radius = []
-        for obj, rgba in zip(episode.objects, scene.object_rgba):
+        for obj, rgba in zip(episode.objects, self._object_colours(scene)):
             mesh = objlib.load_mesh(obj.mesh_id)
             vertices = (mesh.vertices * obj.scale).tolist()
             col = c.createCollisionShape(c.GEOM_MESH, vertices=vertices)  # its convex hull, as MuJoCo collides
@@ -219,16 +224,65 @@ class PybulletSim:
             radius.append(0.5 * float(np.linalg.norm(mesh.extents * np.array(obj.scale))))
         self._radius = np.array(radius)
 
+    @staticmethod
+    def _object_colours(scene: BulletScene) -> list[tuple[float, ...]]:
+        """The objects' drawn colours: below full opacity, blended with the floor's mean colour."""
+        a = scene.object_opacity
+        if a >= 1.0:
+            return list(scene.object_rgba)
+        floor = np.array(scene.floor_rgba[:3])
+        if scene.floor_texture is not None:
+            floor = floor * scene.floor_texture.reshape(-1, 3).mean(axis=0) / 255.0
+        return [(*(a * np.array(rgba[:3]) + (1.0 - a) * floor).tolist(), 1.0) for rgba in scene.object_rgba]
+
+    def _floor_visual(self, scene: BulletScene) -> int:
+        """The bin floor's visual: a flat box, or a square over which the floor texture is tiled."""
+        c = self.client
+        if scene.floor_texture is None:
+            return c.createVisualShape(
+                c.GEOM_BOX, halfExtents=[BIN_HALF, BIN_HALF, 0.0002], rgbaColor=list(scene.floor_rgba)
+            )
+        h, r = BIN_HALF, scene.floor_texture_repeats
+        return c.createVisualShape(
+            c.GEOM_MESH,
+            vertices=[[-h, -h, 0.0002], [h, -h, 0.0002], [h, h, 0.0002], [-h, h, 0.0002]],
+            indices=[0, 1, 2, 0, 2, 3],
+            uvs=[[0, 0], [r, 0], [r, r], [0, r]],
+            normals=[[0, 0, 1]] * 4,
+            rgbaColor=list(scene.floor_rgba),
+        )
+
+    def _floor_texture(self, image: np.ndarray) -> int:
+        """PyBullet's id of ``image`` as a texture, written once per process to a PNG that PyBullet reads."""
+        import hashlib
+        import tempfile
+
+        from PIL import Image
+
+        key = hashlib.sha256(image.tobytes() + str(image.shape).encode()).hexdigest()[:16]
+        path = _TEXTURES.get(key)
+        if path is None:
+            folder = Path(tempfile.gettempdir()) / f"nsl-textures-{os.getpid()}"
+            folder.mkdir(exist_ok=True)
+            path = folder / f"{key}.png"
+            tmp = path.with_name(f".{key}.tmp.png")
+            Image.fromarray(np.ascontiguousarray(image, dtype=np.uint8)).save(tmp)
+            tmp.replace(path)
+            _TEXTURES[key] = path
+        texture = self.client.loadTexture(str(path))
+        if texture < 0:
+            raise EnvironmentSetupError(f"PyBullet could not load the floor texture {path}; check that it is writable")
+        return texture
+
     def _build_bin(self, scene: BulletScene) -> None:
         c = self.client
         table = c.createVisualShape(c.GEOM_BOX, halfExtents=[0.5, 0.5, 0.02], rgbaColor=list(TABLE_RGBA))
         c.createMultiBody(0, -1, table, [0, 0, -0.0205])
         # The floor collides as a half-space (nothing can tunnel through it) and is drawn as the bin's floor.
-        floor_vis = c.createVisualShape(
-            c.GEOM_BOX, halfExtents=[BIN_HALF, BIN_HALF, 0.0002], rgbaColor=list(scene.floor_rgba)
-        )
-        floor = c.createMultiBody(0, c.createCollisionShape(c.GEOM_PLANE), floor_vis, [0, 0, 0])
+        floor = c.createMultiBody(0, c.createCollisionShape(c.GEOM_PLANE), self._floor_visual(scene), [0, 0, 0])
         c.resetBasePositionAndOrientation(floor, [0, 0, 0], [0, 0, 0, 1])
+        if scene.floor_texture is not None:
+            c.changeVisualShape(floor, -1, textureUniqueId=self._floor_texture(scene.floor_texture))
         for x, y, hx, hy in (
             (BIN_HALF + BIN_WALL_T, 0, BIN_WALL_T, BIN_HALF + 2 * BIN_WALL_T),
             (-BIN_HALF - BIN_WALL_T, 0, BIN_WALL_T, BIN_HALF + 2 * BIN_WALL_T),
@@ -268,16 +322,7 @@ class PybulletSim:
                     visualFrameOrientation=_quat_z_to(arm_to - arm_from),
                 ),
             ),
-            YAW: (
-                none,
-                c.createVisualShape(
-                    c.GEOM_CYLINDER,
-                    radius=FLANGE_RADIUS,
-                    length=2 * FLANGE_HALF_HEIGHT,
-                    rgbaColor=list(METAL_RGBA),
-                    visualFramePosition=[0, 0, FLANGE_Z],
-                ),
-            ),
+            YAW: (none, self._flange_visual(scene)),
             MOUNT: (
                 c.createCollisionShape(c.GEOM_BOX, halfExtents=list(PALM_HALF), collisionFramePosition=[0, 0, PALM_Z]),
                 c.createVisualShape(
@@ -335,6 +380,27 @@ class PybulletSim:
         for link in links:  # no joint friction or damping beyond the motors'
             c.setJointMotorControl2(body, link, c.VELOCITY_CONTROL, force=0)
         return body
+
+    def _flange_visual(self, scene: BulletScene) -> int:
+        """The flange below the wrist, and where the finger mount is offset, the bracket that joins them."""
+        c = self.client
+        half = scene.mount_offset[1] / 2.0
+        if abs(half) < 1e-4:
+            return c.createVisualShape(
+                c.GEOM_CYLINDER,
+                radius=FLANGE_RADIUS,
+                length=2 * FLANGE_HALF_HEIGHT,
+                rgbaColor=list(METAL_RGBA),
+                visualFramePosition=[0, 0, FLANGE_Z],
+            )
+        return c.createVisualShapeArray(
+            shapeTypes=[c.GEOM_CYLINDER, c.GEOM_BOX],
+            radii=[FLANGE_RADIUS, 0],
+            lengths=[2 * FLANGE_HALF_HEIGHT, 0],
+            halfExtents=[[0, 0, 0], [0.008, abs(half), 0.006]],
+            rgbaColors=[list(METAL_RGBA)] * 2,
+            visualFramePositions=[[0, 0, FLANGE_Z], [scene.mount_offset[0], half, -0.012]],
+        )
 
     # -- the operations the task is written in ------------------------------------
     @property

@@ -20,6 +20,8 @@ CRITERIA: dict[str, tuple[str, str]] = {
     "softopc": ("softopc", "max"),
     "auc": ("auc", "max"),
     "td": ("td_error", "min"),
+    "qmean": ("q_mean", "max"),  # the average Q of held-out data: its peak (Kumar et al. 2021)
+    "fqe": ("fqe", "max"),  # fitted Q evaluation's estimate of the success rate (nsl.learners.fqe)
 }
 
 

@@ -13,6 +13,9 @@ Offline criteria (no simulator; the caller computes Q-values with the learner)::
     soft_opc(q, success)        mean(Q | successful episode) - mean(Q)   (Irpan et al. 2019), higher is better
     q_ranking_auc(q, success)   P(Q of a success > Q of a failure), ties 1/2, higher is better
     td_error(q, target)         mean((Q - Bellman target)^2) on held-out transitions, lower is better
+    q_mean                      the average Q of held-out transitions: a peak, then a decline, marks
+                                overfitting in conservative offline RL (Kumar et al. 2021), so its maximum
+    fqe                         fitted Q evaluation's estimate of the success rate (nsl.learners.fqe)
 
 :func:`choose_steps` replays every criterion over a recorded curve and says
 how far each one's chosen step is from the step evaluation shows is best.
@@ -34,7 +37,7 @@ from nsl.errors import ConfigError, CorruptDataError
 from nsl.workspace import atomic_write_json
 
 from .config import CRITERIA, EarlyStopConfig, EarlyStopping, EvalConfig  # noqa: F401  (re-exported)
-from .records import CURVE_FILE, EARLY_STOP_FILE, CurveRow, Rate, read_curve, write_curve
+from .records import CURVE_FILE, EARLY_STOP_FILE, OFFLINE_COLUMNS, CurveRow, Rate, read_curve, write_curve
 from .success import SuccessRate, run_eval_episodes
 
 # --- offline criteria -----------------------------------------------------------------------------------------------
@@ -130,7 +133,7 @@ class EarlyStopMonitor:
     """An ``eval_fn(step, policy) -> dict`` for the trainer that records the curve and decides when to stop.
 
     ``score_target``/``score_base`` return a SuccessRate (or Rate) for a policy;
-    ``offline`` returns ``{"softopc": .., "auc": .., "td_error": ..}`` (any
+    ``offline`` returns ``{"softopc": .., "auc": .., "td_error": .., "q_mean": .., "fqe": ..}`` (any
     subset) for a policy.  ``on_best(step, policy)`` is called whenever the
     criterion improves (keep that checkpoint).  Calling it again after a
     resumed run drops the recorded rows from the resumed step on and replays
@@ -181,10 +184,10 @@ class EarlyStopMonitor:
         target = Rate.of(self.score_target(policy)) if self.score_target is not None else None
         base = Rate.of(self.score_base(policy)) if self.score_base is not None else None
         off = dict(self.offline(policy)) if self.offline is not None else {}
-        unknown = sorted(set(off) - {"softopc", "auc", "td_error", "q_mean"})
+        unknown = sorted(set(off) - set(OFFLINE_COLUMNS))
         if unknown:
-            raise ConfigError(f"offline scores {unknown} are unknown; return softopc, auc and/or td_error")
-        row = CurveRow(int(step), target, base, off.get("softopc"), off.get("auc"), off.get("td_error"))
+            raise ConfigError(f"offline scores {unknown} are unknown; return any of {', '.join(OFFLINE_COLUMNS)}")
+        row = CurveRow(int(step), target, base, **{k: off.get(k) for k in OFFLINE_COLUMNS})
         self.rows.append(row)
         stop = self.stopper.update(row.step, row.value(self.config.column))
         write_curve(self.run_dir / CURVE_FILE, self.rows)

@@ -53,8 +53,10 @@ CURVE_COLUMNS = (
     "softopc",
     "auc",
     "td_error",
+    "q_mean",
+    "fqe",
 )
-OFFLINE_COLUMNS = ("softopc", "auc", "td_error")
+OFFLINE_COLUMNS = ("softopc", "auc", "td_error", "q_mean", "fqe")
 
 
 def _finite(x: Any) -> float | None:
@@ -141,6 +143,8 @@ class CurveRow:
     softopc: float | None = None  # offline criteria on held-out target data
     auc: float | None = None
     td_error: float | None = None
+    q_mean: float | None = None  # the average Q-value of the held-out transitions
+    fqe: float | None = None  # fitted Q evaluation's estimate of the success rate
 
     def value(self, column: str) -> float | None:
         if column == "target_success":
@@ -162,7 +166,7 @@ class CurveRow:
                     f"{prefix}_episodes": d.get("episodes"),
                 }
             )
-        out.update(softopc=self.softopc, auc=self.auc, td_error=self.td_error)
+        out.update(softopc=self.softopc, auc=self.auc, td_error=self.td_error, q_mean=self.q_mean, fqe=self.fqe)
         return out
 
     @classmethod
@@ -184,6 +188,8 @@ class CurveRow:
             _finite(d.get("softopc")),
             _finite(d.get("auc")),
             _finite(d.get("td_error")),
+            _finite(d.get("q_mean")),
+            _finite(d.get("fqe")),
         )
 
 

@@ -72,7 +72,7 @@ def evaluate(
         raise ConfigError(f"--workers {workers} and --num-envs {num_envs} must be at least 1")
     if not refs:
         raise ConfigError("no policy to evaluate; give --checkpoint REF or --policy REF")
-    shifts = parse_shift_list(shift, severity)
+    shifts = parse_shift_list(shift, severity, o.engine)
     config = EvalConfig(episodes=episodes, split=split, seed=seed, workers=workers, batch=num_envs)
 
     from nsl.learners.precision import resolve_precision

@@ -60,7 +60,8 @@ def check(config: OnlineConfig) -> None:
     from nsl.collectors import parse_shift
     from nsl.errors import ConfigError
 
-    if not parse_shift(config.shift).shifts:
+    spec = parse_shift(config.shift, engine=config.engine)
+    if not spec.shifts and spec.engine == "mujoco":
         raise ConfigError(f"--shift {config.shift!r} is the base task; name the target shift, e.g. harsh_lighting@2")
     for name in ("rounds", "episodes", "steps", "eval_episodes"):
         if getattr(config, name) < 1:
@@ -108,7 +109,7 @@ def _online(config: OnlineConfig, name: str, progress: bool) -> OnlineResult:
             data = f"{name}-r{i}"
             collect_service.collect(
                 CollectConfig(
-                    shift=config.shift,
+                    shift=config.target,
                     episodes=config.episodes,
                     policy=policy,
                     data=data,
@@ -129,7 +130,7 @@ def _online(config: OnlineConfig, name: str, progress: bool) -> OnlineResult:
                     steps=config.steps,
                     seed=config.seed,
                     learner=config.learner,
-                    target_shift=config.shift,
+                    target_shift=config.target,
                     precision=config.precision,
                 ),
                 progress=progress,
@@ -140,7 +141,7 @@ def _online(config: OnlineConfig, name: str, progress: bool) -> OnlineResult:
         rate = evaluate_service.evaluate(
             [policy],
             EvaluateOptions(
-                shift=config.shift,
+                shift=config.target,
                 episodes=config.eval_episodes,
                 seed=config.eval_scenes,
                 workers=config.workers,
@@ -148,7 +149,7 @@ def _online(config: OnlineConfig, name: str, progress: bool) -> OnlineResult:
             ),
             progress=progress,
             source="online",
-        ).table[policy][config.shift]
+        ).table[policy][config.target]
         low, high = rate.ci
         rows.append(
             {
@@ -163,5 +164,5 @@ def _online(config: OnlineConfig, name: str, progress: bool) -> OnlineResult:
         )
         workspace.atomic_write_json(path, rows)
         if progress:
-            print(f"round {i}: {i * config.episodes} grasps, success on {config.shift} {rate}")
+            print(f"round {i}: {i * config.episodes} grasps, success on {config.target} {rate}")
     return OnlineResult(run_dir, rows)

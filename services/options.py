@@ -124,6 +124,12 @@ class EvaluateOptions:
         "reported with the results",
         choices=PRECISIONS,
     )
+    engine: str = option(
+        "mujoco",
+        ENGINE_HELP + "; for the shifts that name none (engine:pybullet+SHIFT names its own), and part of each "
+        "result's name off MuJoCo",
+        choices=ENGINES,
+    )
 
 
 # --- train ----------------------------------------------------------------------------------------------------------
@@ -221,8 +227,9 @@ class TrainOptions:
         EarlyStopConfig.criterion,
         "what early stopping follows: eval = simulator success on the "
         "target shift; softopc, auc = Q-values of held-out target episodes (higher is better); "
-        "td = TD error on held-out target transitions (lower is better); the offline ones need "
-        "no simulator",
+        "td = TD error on held-out target transitions (lower is better); qmean = their average Q, "
+        "stopping after its peak (Kumar et al. 2021); fqe = fitted Q evaluation's estimate of the "
+        "success rate from them; the offline ones need no simulator",
     )
     holdout: float = option(
         EarlyStopConfig.held_out,
@@ -301,6 +308,19 @@ class OnlineConfig:
         "collection and evaluation act in fp32",
         choices=PRECISIONS,
     )
+    engine: str = option(
+        "mujoco",
+        ENGINE_HELP + " of the target shift (engine:pybullet+SHIFT names its own; engine:pybullet alone is the base "
+        "task on PyBullet)",
+        choices=ENGINES,
+    )
+
+    @property
+    def target(self) -> str:
+        """The target's one name, its engine included off MuJoCo (engine:pybullet+harsh_lighting@2)."""
+        from nsl.collectors import parse_shift
+
+        return parse_shift(self.shift, engine=self.engine).name
 
 
 @dataclass(frozen=True)

@@ -84,7 +84,7 @@ def _push_dataset(ref: str, dest: str):
         episodes=v.num_episodes,
         frames=v.num_frames,
         success_rate=view.success_rate,
-        shift=str(env.get("shift", "base")),
+        shift=str(env.get("shift_spec", {}).get("name") or env.get("shift", "base")),  # engine:NAME+... off MuJoCo
         policy=str(spec.get("policy_ref", "?")),
         env_version=str(env.get("env_version", "?")),
         codebase_version=api.layout.CODEBASE_VERSION,

@@ -37,7 +37,7 @@ from nsl.learners.config import FINE_TUNE_STEPS, TrainConfig
 from nsl.scenes import REPORTING_SCENES, SELECTION_SCENES
 from nsl.services.options import FeaturesConfig
 
-SHIPPED = ("tiny", "small", "full", "full-seeds", "full-sequence", "headline", "online", "paper")
+SHIPPED = ("tiny", "small", "full", "full-seeds", "full-sequence", "headline", "cross-engine", "online", "paper")
 BASE_DATA_SOURCES = ("checkpoint", "plan")
 # Baselines that are not a fine-tuning method of their own: what each one leaves out separates a cause of the gain.
 #   scratch_target  random initialisation, trained on the target data alone (no base half)
@@ -341,8 +341,10 @@ def _shift(name: str, what: str) -> str:
         spec = parse_shift(name)
     except UnknownReferenceError as e:  # it names the shift and the closest known ones; add where it is
         raise UnknownReferenceError(f"plan {what}: {e}") from None
-    if what != "base_data.datasets.shift" and not spec.shifts:
-        raise ConfigError(f"plan {what} = 'base': the base task is evaluated everywhere already; name a shift")
+    if what != "base_data.datasets.shift" and not spec.shifts and spec.engine == "mujoco":
+        raise ConfigError(
+            f"plan {what} = 'base': the base task is evaluated everywhere already; name a shift (or engine:pybullet)"
+        )
     return spec.name
 
 

@@ -66,7 +66,9 @@ class Unit:
 
 
 def slug(shift: str) -> str:
-    return shift.replace("+", "-").replace("@", "-").replace("_", "-")
+    """A shift's name as part of a dataset or checkpoint name: engine:pybullet+harsh_lighting@2 ->
+    engine-pybullet-harsh-lighting-2."""
+    return shift.replace("+", "-").replace("@", "-").replace("_", "-").replace(":", "-")
 
 
 def train_tag(

@@ -42,7 +42,7 @@ FORBIDDEN = {
 WORDS = {"batch": "batch_size", "worker": "workers", "seed": "seed", "json": "json"}
 CLOSED = {
     "split": {"train", "test"},
-    "criterion": {"eval", "softopc", "auc", "td"},
+    "criterion": {"eval", "softopc", "auc", "td", "qmean", "fqe"},
     "precision": {"fp32", "bf16", "auto"},
     "engine": {"mujoco", "pybullet"},
 }

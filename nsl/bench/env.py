@@ -1,8 +1,10 @@
 """``nsl bench env``: grasp attempts per second, nsl vs PyBullet's KukaDiverseObjectEnv.
 
-Both environments run in this process, one after the other, on the same
+The environments run in this process, one after the other, on the same
 machine state: 64x64 images, 5 objects, random actions, no early termination
-(every attempt runs its full 8 steps and ends in a grasp).
+(every attempt runs its full 8 steps and ends in a grasp).  ``--engine
+pybullet`` times nsl's env on PyBullet and on MuJoCo beside the reference, so
+both ratios come from one run.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import types
 import warnings
 
 HELP = "grasp attempts/s of nsl's env vs PyBullet's KukaDiverseObjectEnv (target ratio >= 20)"
+ENGINES = ("mujoco", "pybullet")  # nsl.collectors.ENGINES (that package loads gymnasium)
 
 
 def add_arguments(p) -> None:
@@ -21,7 +24,14 @@ def add_arguments(p) -> None:
         "--seconds",
         type=float,
         default=None,
-        help="time budget for the reference env (default 60, quick 25); nsl gets a quarter of it",
+        help="time budget for the reference env (default 60, quick 25); nsl gets a quarter of it per engine",
+    )
+    p.add_argument(
+        "--engine",
+        choices=ENGINES,
+        default=ENGINES[0],
+        help="nsl's engine to time against the reference (target ratio: 20 on mujoco, 5 on pybullet); "
+        "pybullet also times mujoco in the same run",
     )
 
 
@@ -86,13 +96,13 @@ def _time_reference(seconds: float, seed: int = 0) -> tuple[float, int]:
     return attempts / dt, attempts
 
 
-def _time_nsl(seconds: float, seed: int = 0) -> tuple[float, int]:
+def _time_nsl(seconds: float, seed: int = 0, engine: str = ENGINES[0]) -> tuple[float, int]:
     import numpy as np
 
     from nsl.collectors import EnvConfig, GraspEnv
 
-    env = GraspEnv(EnvConfig(min_objects=5, max_objects=5, image_size=64))
-    env.reset(seed=seed)  # warm-up: GL context, shader compilation, mesh parsing
+    env = GraspEnv(EnvConfig(min_objects=5, max_objects=5, image_size=64, engine=engine))
+    env.reset(seed=seed)  # warm-up: GL context or PyBullet client, shader compilation, mesh parsing
     rng = np.random.default_rng(seed)
     attempts = 0
     t0 = time.perf_counter()
@@ -112,9 +122,12 @@ def _time_nsl(seconds: float, seed: int = 0) -> tuple[float, int]:
 
 def run(args) -> dict:
     seconds = args.seconds or (25.0 if args.quick else 60.0)
-    nsl_rate, nsl_n = _time_nsl(seconds / 4)
+    engine = getattr(args, "engine", ENGINES[0])
+    timed = {e: _time_nsl(seconds / 4, engine=e) for e in dict.fromkeys((engine, ENGINES[0]))}
     ref_rate, ref_n = _time_reference(seconds)
-    return {
+    nsl_rate, nsl_n = timed[engine]
+    out = {
+        "engine": engine,
         "nsl_attempts_per_s": round(nsl_rate, 2),
         "reference_attempts_per_s": round(ref_rate, 3),
         "ratio": round(nsl_rate / ref_rate, 1),
@@ -124,3 +137,8 @@ def run(args) -> dict:
         "objects": 5,
         "reference": "pybullet_envs.bullet.kuka_diverse_object_gym_env.KukaDiverseObjectEnv",
     }
+    if engine != ENGINES[0]:  # MuJoCo's ratio beside it, from the same run
+        mj_rate, mj_n = timed[ENGINES[0]]
+        out |= {"mujoco_attempts_per_s": round(mj_rate, 2), "mujoco_ratio": round(mj_rate / ref_rate, 1)}
+        out |= {"mujoco_attempts": mj_n}
+    return out

@@ -15,7 +15,7 @@ METHODS = (
     "pnn",
     "ft_pnn",
 )  # nsl.learners.METHODS (checked by the test of options)
-CRITERIA = ("eval", "softopc", "auc", "td")  # nsl.eval.CRITERIA
+CRITERIA = ("eval", "softopc", "auc", "td", "qmean", "fqe")  # nsl.eval.CRITERIA
 
 
 def register(sub: argparse._SubParsersAction) -> None:

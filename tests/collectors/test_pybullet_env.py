@@ -105,12 +105,67 @@ def test_unknown_engine_fails_in_one_line_listing_the_engines():
         EnvConfig(engine="bullet")
 
 
-def test_a_shift_without_a_pybullet_apply_fails_in_one_line():
+def test_a_shift_without_a_pybullet_apply_fails_in_one_line(monkeypatch):
+    from nsl.collectors import ShiftDef, register_shift
+    from nsl.collectors import shifts as shift_module
+
+    monkeypatch.setattr(shift_module, "SHIFTS", dict(shift_module.SHIFTS))  # forget it afterwards
+    register_shift(ShiftDef("dim_lights", "vision", 1.0, lambda s: {"scale": s}, lambda spec, p: None, "dimmer"))
+    EnvConfig(shift="dim_lights")  # MuJoCo's apply is there
     with pytest.raises(ConfigError) as e:
-        EnvConfig(engine="pybullet", shift="base+harsh_lighting@2")
+        EnvConfig(engine="pybullet", shift="harsh_lighting@2+dim_lights")
     message = str(e.value)
-    assert "\n" not in message and "'harsh_lighting'" in message and "'pybullet'" in message
+    assert "\n" not in message and "'dim_lights'" in message and "'pybullet'" in message
     assert "engine_applies" in message  # what to add
+
+
+def _first_frames(shift: str, seeds=range(2), image_size: int = 32, camera: str = "wrist") -> dict[str, np.ndarray]:
+    frames = {}
+    for engine in ENGINES:
+        env = GraspEnv(EnvConfig(engine=engine, shift=shift, image_size=image_size, camera=camera))
+        frames[engine] = np.stack([env.reset(seed=s)[0]["image"] for s in seeds]).astype(np.float64)
+        env.close()
+    return frames
+
+
+@pytest.mark.parametrize("shift", ["harsh_lighting", "checkerboard_backing", "transparent_objects"])
+def test_the_visual_shifts_change_pybullets_frames_as_they_change_mujocos(shift):
+    base, shifted = _first_frames("base"), _first_frames(shift)
+    change = {e: shifted[e] - base[e] for e in ENGINES}
+    for engine in ENGINES:
+        assert np.abs(change[engine]).mean() > 1.0, engine  # the shift shows
+    a, b = (change[e].mean(axis=-1).ravel() for e in ENGINES)
+    a, b = a - a.mean(), b - b.mean()
+    assert float(a @ b / np.sqrt((a @ a) * (b @ b))) > 0.4  # ... in the same places, the same way (0.55-0.8 here)
+
+
+def test_the_gripper_shifts_move_pybullets_fingers_as_mujocos():
+    for shift, check in (("extend_gripper@2", "tip"), ("offset_gripper@0.5", "offset")):
+        envs = {e: GraspEnv(EnvConfig(engine=e, shift=shift)) for e in ENGINES}
+        base = {e: GraspEnv(EnvConfig(engine=e)) for e in ENGINES}
+        try:
+            for env in (*envs.values(), *base.values()):
+                env.reset(seed=0)
+            if check == "tip":  # 2 cm longer fingers reach 2 cm further below the wrist on both engines
+                for e in ENGINES:
+                    grown = envs[e]._sim.tip_below_wrist - base[e]._sim.tip_below_wrist
+                    assert grown == pytest.approx(0.02, abs=1e-6), e
+            else:  # the fingers 5 cm to the side of the controlled wrist, as the oracle is told
+                offsets = [envs[e].privileged_state()["finger_offset"] for e in ENGINES]
+                assert offsets[0] == pytest.approx([0.0, 0.05], abs=1e-6) and offsets[1] == pytest.approx(offsets[0])
+        finally:
+            for env in (*envs.values(), *base.values()):
+                env.close()
+    # The shoulder camera sees the offset bracket and the moved fingers.
+    frames = {s: _first_frames(s, seeds=[0], camera="shoulder")["pybullet"] for s in ("base", "offset_gripper")}
+    assert np.abs(frames["offset_gripper"] - frames["base"]).mean() > 1.0
+
+
+def test_shifts_compose_on_pybullet():
+    frames = {s: _first_frames(s, seeds=[0])["pybullet"] for s in ("base", "harsh_lighting", "checkerboard_backing")}
+    both = _first_frames("checkerboard_backing+harsh_lighting", seeds=[0])["pybullet"]
+    for alone in ("harsh_lighting", "checkerboard_backing"):
+        assert np.abs(both - frames[alone]).mean() > 3.0  # the other shift shows on top of each one
 
 
 def test_the_engine_is_recorded_only_when_it_is_not_mujoco():

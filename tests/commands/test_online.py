@@ -112,3 +112,9 @@ def test_online_rounds_mix_and_bad_settings():
     ]:
         with pytest.raises(ConfigError, match=message):
             check(OnlineConfig(**bad))
+    # The engine is a target like a shift: alone it is PyBullet's base task; with --engine it joins the shift's name.
+    check(OnlineConfig(shift="engine:pybullet"))
+    assert OnlineConfig(shift="harsh_lighting@2", engine="pybullet").target == "engine:pybullet+harsh_lighting@2"
+    assert OnlineConfig(shift="harsh_lighting@2+engine:pybullet").target == "engine:pybullet+harsh_lighting@2"
+    with pytest.raises(ConfigError, match="is the base task"):
+        check(OnlineConfig(shift="base", engine="mujoco"))

@@ -510,6 +510,24 @@ def test_td_criterion_chooses_a_step_by_held_out_td_error(pipeline, capsys):
             assert cat.resolve_checkpoint(f"ckpt:td-tiny@{summary['best_step']}").step == summary["best_step"]
 
 
+@pytest.mark.parametrize("criterion, column", [("qmean", "q_mean"), ("fqe", "fqe")])
+def test_average_q_and_fqe_criteria_choose_a_step_without_a_simulator(pipeline, capsys, criterion, column):
+    from nsl.eval import read_curve
+
+    name = f"{criterion}-tiny"
+    train = ["train", "--data", "grasp-base=0.5", "--data", "grasp-harsh=0.5", "--init", "ckpt:base-tiny"]
+    offline = ["--eval-every", "2", "--eval-episodes", "0", "--holdout", "0.25", "--patience", "3"]
+    assert run_cli(*train, "--steps", "4", "--name", name, *offline, "--criterion", criterion) == 0
+    run_dir = workspace.runs_dir() / name
+    rows = read_curve(run_dir / "curve.csv")
+    values = [getattr(r, column) for r in rows]
+    assert [r.step for r in rows] == [0, 2, 4] and all(v is not None and 0.0 <= v <= 1.0 for v in values)
+    assert all(r.q_mean is not None for r in rows)  # the average Q comes with every offline evaluation
+    summary = json.loads((run_dir / "early_stop.json").read_text())
+    assert summary["criterion"] == criterion and summary["mode"] == "max"
+    assert summary["best_step"] == [r.step for r in rows][values.index(max(values))]
+
+
 def test_efficiency_writes_tiers_json_that_the_report_reads(pipeline, capsys):
     from nsl.eval import TierResults
 

@@ -107,3 +107,22 @@ def test_info_json_mirror_validates_itself(make_synth):
     bad = {**info.to_dict(), "features": {**info.features, keys.OBS_STATE: v1_state}}
     with pytest.raises(IncompatibleVersionError, match="collect the dataset again"):  # environment v1 data
         api.layout.DatasetInfo.from_dict(bad)
+
+
+def test_a_pybullet_dataset_opens_in_lerobot_and_fine_tunes_the_base_with_no_new_flags(lerobot_offline):
+    from nsl.catalog import Catalog
+
+    collect = ["collect", "--engine", "pybullet", "--shift", "harsh_lighting@2", "--episodes", "4"]
+    assert run_cli(*collect, "--policy", "oracle:0.5", "--data", "grasp-pb-harsh") == 0
+    view = api.open_view("grasp-pb-harsh")
+    env = view.version.provenance["collections"][-1]["spec"]["env"]
+    assert env["engine"] == "pybullet" and env["shift_spec"]["name"] == "engine:pybullet+harsh_lighting@2"
+    _assert_lerobot_matches(lerobot_offline("local/grasp-pb-harsh", root=view.version.root), view.episodes_arrays())
+
+    # The fine-tune reads the engine from the data: its early-stopping evaluations run on PyBullet.
+    train = ["train", "--init", "ckpt:base", "--data", "grasp-pb-harsh", "--steps", "2", "--name", "pb-ft"]
+    assert run_cli(*train, "--eval-every", "2", "--eval-episodes", "2", "--workers", "1") == 0
+    with Catalog() as cat:
+        child = cat.resolve_checkpoint("ckpt:pb-ft@latest")
+        assert child.shift == "engine:pybullet+harsh_lighting@2"
+        assert {e.shift for e in cat.evaluations(child.id)} == {"engine:pybullet+harsh_lighting@2"}

@@ -54,8 +54,10 @@ def test_resumed_and_parallel_collections_equal_an_uninterrupted_one(capsys):
     assert api.open_version("parallel").hash == whole.hash
 
 
-def test_killed_collection_leaves_no_version_and_resumes_to_the_same_hash():
-    argv = [sys.executable, "-m", "nsl", *COLLECT, "--episodes", "16", "--episodes-per-file", "2", "--data", "killed"]
+@pytest.mark.parametrize("engine", ["mujoco", "pybullet"])
+def test_killed_collection_leaves_no_version_and_resumes_to_the_same_hash(engine):
+    collect = [*COLLECT, "--engine", engine]
+    argv = [sys.executable, "-m", "nsl", *collect, "--episodes", "16", "--episodes-per-file", "2", "--data", "killed"]
     proc = subprocess.Popen(argv, cwd=ROOT, env={**os.environ}, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     staged = api.dataset_root("killed") / ".staging/data/chunk-000/file-000.parquet"
     try:
@@ -68,8 +70,8 @@ def test_killed_collection_leaves_no_version_and_resumes_to_the_same_hash():
     assert staged.exists()
     assert api.list_versions("killed") == [] and api.dataset_names() == []
 
-    assert run_cli(*COLLECT, "--episodes", "16", "--episodes-per-file", "2", "--data", "killed") == 0
-    assert run_cli(*COLLECT, "--episodes", "16", "--episodes-per-file", "2", "--data", "fresh") == 0
+    assert run_cli(*collect, "--episodes", "16", "--episodes-per-file", "2", "--data", "killed") == 0
+    assert run_cli(*collect, "--episodes", "16", "--episodes-per-file", "2", "--data", "fresh") == 0
     assert api.open_version("killed").hash == api.open_version("fresh").hash
     assert not (api.dataset_root("killed") / ".staging").exists()
 

@@ -295,3 +295,16 @@ def test_online_settings_are_checked_before_any_work():
     ):
         with pytest.raises(ConfigError, match=message):
             parse_plan(tomllib.loads(MINI_PLAN.replace(old, new)))
+
+
+def test_the_engine_is_a_cell_of_the_study_like_a_shift():
+    from .conftest import MICRO_PLAN
+
+    text = MICRO_PLAN.replace('shifts = ["harsh_lighting"]', 'shifts = ["harsh_lighting", "engine:pybullet"]')
+    plan, units = _units(text)
+    assert plan.shifts[-1] == "engine:pybullet"
+    collect = units["collect:engine:pybullet:base"]
+    assert collect.params["shift"] == "engine:pybullet" and collect.params["dataset"] == "mini-engine-pybullet-by-base"
+    assert "train:ft-engine-pybullet-n8-k10-s0" in units
+    evals = {n for n in units if n.startswith("eval:ft-engine-pybullet-n8-k10-s0:")}
+    assert evals == {"eval:ft-engine-pybullet-n8-k10-s0:base", "eval:ft-engine-pybullet-n8-k10-s0:engine:pybullet"}
