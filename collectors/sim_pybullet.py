@@ -206,14 +206,20 @@ class PybulletSim:
         for obj, rgba in zip(episode.objects, self._object_colours(scene)):
             mesh = objlib.load_mesh(obj.mesh_id)
             vertices = (mesh.vertices * obj.scale).tolist()
-            col = c.createCollisionShape(c.GEOM_MESH, vertices=vertices)  # its convex hull, as MuJoCo collides
-            vis = c.createVisualShape(
-                c.GEOM_MESH, vertices=vertices, indices=mesh.faces.flatten().tolist(), rgbaColor=list(rgba)
-            )
+            try:
+                col = c.createCollisionShape(c.GEOM_MESH, vertices=vertices)  # its convex hull, as MuJoCo collides
+                vis = c.createVisualShape(
+                    c.GEOM_MESH, vertices=vertices, indices=mesh.faces.flatten().tolist(), rgbaColor=list(rgba)
+                )
+            except self.pb.error as e:
+                col = vis = -1
+                why = str(e).rstrip(".")
+            else:
+                why = "no shape id"
             if col < 0 or vis < 0:
                 raise EnvironmentSetupError(
-                    f"PyBullet could not load object mesh {mesh.name} ({objlib.urdf_root() / mesh.name}); "
-                    "reinstall pybullet (`pip install --force-reinstall pybullet`)"
+                    f"PyBullet could not load object mesh {mesh.name} ({objlib.urdf_root() / mesh.name}: {why}); "
+                    "reinstall pybullet (`pip install --force-reinstall pybullet`), whose package holds the meshes"
                 )
             w, x, y, z = obj.quat
             body = c.createMultiBody(OBJECT_MASS, col, vis, list(obj.pos), [x, y, z, w])

@@ -68,7 +68,7 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
         "",
         "## Findings",
         "",
-        findings_table(findings(records)),
+        *_findings(records),
         "",
         *_headline(records),
         "## Challenge table (Table 5.1)",
@@ -86,7 +86,7 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
         "scratch_target one on the target data alone, no_target the base fine-tuned on base data alone; "
         "supervised and supervised_frozen are a fresh head on supervised features (the trunk trained to classify "
         "the train objects from rendered frames, the project's analogue of the study's ImageNet column), the trunk "
-        " ".join(["trained and frozen.", *filter(None, [features_note(records)]), "Success on the shift:"]),
+        + " ".join(["trained and frozen.", *filter(None, [features_note(records)]), "Success on the shift:"]),
         "",
         tiers_table(records),
         "",
@@ -156,6 +156,19 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
         )
         parts += _figure(figures, "early_stop", "early stopping")
     return "\n".join(parts)
+
+
+def _findings(records: Mapping[str, Any]) -> list[str]:
+    """The findings against the source, or why there are none: a plan whose shifts are none of the source's
+    challenges (the engine as a shift, ``engine:pybullet``) has nothing of the source's to hold them to."""
+    from nsl.study import reference as ref
+
+    if not any(ref.study_shift(s) in ref.STUDY_DROPS for s in records["plan"]["shifts"]):
+        return [
+            "None of this plan's shifts is one of the source's challenges, so no finding of the source is tested "
+            "here; the tables below give the measurements."
+        ]
+    return [findings_table(findings(records))]
 
 
 def _headline(records: Mapping[str, Any]) -> list[str]:

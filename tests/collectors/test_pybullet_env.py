@@ -185,3 +185,31 @@ def test_a_shared_mujoco_renderer_is_refused_on_pybullet():
             GraspEnv(PYBULLET, renderer=renderer)
     finally:
         renderer.close()
+
+
+def test_a_pybullet_that_fails_to_start_or_a_mesh_it_cannot_load_fails_in_one_line(monkeypatch):
+    import pybullet
+    from pybullet_utils import bullet_client
+
+    from nsl.collectors import objects
+    from nsl.errors import EnvironmentSetupError
+
+    real_mesh = objects.load_mesh
+
+    def empty_mesh(object_id):  # a mesh with no vertices: PyBullet itself refuses its shapes
+        mesh = real_mesh(object_id)
+        return type(mesh)(mesh.name, mesh.vertices[:0], mesh.faces[:0], mesh.extents)
+
+    monkeypatch.setattr(objects, "load_mesh", empty_mesh)
+    env = GraspEnv(PYBULLET)
+    with pytest.raises(EnvironmentSetupError) as e:
+        env.reset(seed=0)
+    env.close()
+    assert "\n" not in str(e.value) and "could not load object mesh" in str(e.value) and "reinstall" in str(e.value)
+
+    def refuse(*args, **kwargs):  # the library's boundary: a client that cannot connect
+        raise pybullet.error("cannot connect to the physics server")
+
+    monkeypatch.setattr(bullet_client, "BulletClient", refuse)
+    with pytest.raises(EnvironmentSetupError, match=r"^PyBullet failed to start in DIRECT mode .*reinstall"):
+        GraspEnv(PYBULLET)

@@ -151,6 +151,8 @@ def test_render_states_the_epsilon_and_every_section():
         "## Overfitting and early stopping",
     ):
         assert heading in text
+    # the Table 5.2 paragraph reads in order, from the recipe to the baselines to the table
+    assert "ImageNet column), the trunk trained and frozen." in text and "the trunk  Success" not in text
 
 
 def test_a_study_in_progress_reports_what_it_has():

@@ -308,3 +308,10 @@ def test_the_engine_is_a_cell_of_the_study_like_a_shift():
     assert "train:ft-engine-pybullet-n8-k10-s0" in units
     evals = {n for n in units if n.startswith("eval:ft-engine-pybullet-n8-k10-s0:")}
     assert evals == {"eval:ft-engine-pybullet-n8-k10-s0:base", "eval:ft-engine-pybullet-n8-k10-s0:engine:pybullet"}
+
+
+def test_a_plan_of_the_engine_alone_tests_no_finding_of_the_source():
+    from nsl.study.report.document import _findings
+
+    (line,) = _findings({"plan": {"shifts": ["engine:pybullet"]}})
+    assert line.startswith("None of this plan's shifts is one of the source's challenges")
