@@ -452,12 +452,12 @@ def parse_shift(text: str, severity: float | None = None, engine: str | None = N
     named_engine = None
     for token in text.split("+"):
         if token.strip().startswith(ENGINE_TOKEN):
-            value = token.strip()[len(ENGINE_TOKEN) :]
-            if value not in ENGINES:
-                raise ConfigError(f"engine {value!r} in shift {text!r} is unknown; use one of {', '.join(ENGINES)}")
-            if named_engine is not None and value != named_engine:
+            named = token.strip()[len(ENGINE_TOKEN) :]
+            if named not in ENGINES:
+                raise ConfigError(f"engine {named!r} in shift {text!r} is unknown; use one of {', '.join(ENGINES)}")
+            if named_engine is not None and named != named_engine:
                 raise ConfigError(f"shift {text!r} names two engines; name one (engine:{'|engine:'.join(ENGINES)})")
-            named_engine = value
+            named_engine = named
             continue
         name, _, sev = token.strip().partition("@")
         if name == BASE:

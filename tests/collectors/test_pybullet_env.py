@@ -8,7 +8,7 @@ from dataclasses import astuple
 import numpy as np
 import pytest
 
-from nsl.collectors import ENGINES, EnvConfig, GraspEnv, make_envs, run_episodes, scripted_policy
+from nsl.collectors import ENGINES, EnvConfig, GraspEnv, make_envs, parse_shift, run_episodes, scripted_policy
 from nsl.errors import ConfigError
 
 PYBULLET = EnvConfig(engine="pybullet")
@@ -103,6 +103,18 @@ def test_full_control_and_the_shoulder_camera_run():
 def test_unknown_engine_fails_in_one_line_listing_the_engines():
     with pytest.raises(ConfigError, match=r"^engine 'bullet' is unknown; use one of mujoco, pybullet$"):
         EnvConfig(engine="bullet")
+    with pytest.raises(ConfigError, match=r"^engine 'bullet' in shift 'engine:bullet' is unknown; use one of"):
+        EnvConfig(shift="engine:bullet")
+    with pytest.raises(ConfigError, match=r"names two engines"):
+        EnvConfig(shift="engine:pybullet+engine:mujoco")
+    with pytest.raises(ConfigError, match=r"^shift 'engine:mujoco' is on engine 'mujoco', but engine 'pybullet'"):
+        parse_shift("engine:mujoco", engine="pybullet")
+    config = EnvConfig(shift="harsh_lighting+engine:pybullet")  # the engine moves to its field
+    assert (config.engine, config.shift, config.shift_spec.name) == (
+        "pybullet",
+        "harsh_lighting",
+        "engine:pybullet+harsh_lighting",
+    )
 
 
 def test_a_shift_without_a_pybullet_apply_fails_in_one_line(monkeypatch):
