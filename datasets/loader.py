@@ -231,6 +231,26 @@ class Sampler:
                 at += int(k)
         return out
 
+    def tables(self) -> list[tuple[dict[str, np.ndarray], float]]:
+        """Each source's transitions as arrays, with its weight: ``images`` (its image cache), the frame indices
+        ``obs`` and ``next`` into it, and the per-transition columns (what a GPU copies to sample there)."""
+        out = []
+        for src, w in zip(self.sources, self.weights):
+            table = {
+                "images": src.images,
+                "obs": src.obs_index,
+                "next": src.next_index,
+                keys.OBS_STATE: src.states[src.obs_index - src._first],
+                keys.NEXT_OBS_STATE: src.states[src.next_index - src._first],
+                keys.ACTION: src.actions,
+                keys.REWARD: src.reward,
+                keys.DONE: src.done,
+            }
+            if self.n_step > 1:
+                table[keys.DISCOUNT] = src.discount
+            out.append((table, float(w)))
+        return out
+
     def describe(self) -> dict[str, Any]:
         return {
             "transitions": len(self),

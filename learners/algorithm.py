@@ -10,7 +10,9 @@ early stopping and logging.  The learner owns the gradient step::
 
 ``state`` has ``online`` (the network a checkpoint saves, a ``QNetwork``), ``set_lr(lr)``, ``state_dict()`` and
 ``load_state_dict()`` (what a resumed run restores).  ``metrics`` holds at least ``losses/q_loss``, ``q/mean``
-and ``q/target_mean``.  ``options`` is the learner's own settings (``Algorithm.Options``, a dataclass), recorded in
+and ``q/target_mean``, as numbers or as 0-d tensors that the loop reads only when it logs (on a GPU, reading one
+makes the host wait for the device).  ``cfg.device`` is where the state lives: ``create`` moves ``net`` there and
+``update`` moves the batch.  ``options`` is the learner's own settings (``Algorithm.Options``, a dataclass), recorded in
 ``TrainConfig.learner_options``.  An algorithm declares the fine-tuning ``methods`` it supports and whether
 ``early_stopping`` (a CEM policy evaluated in the simulator) applies; ``train`` refuses the rest in one line.
 
@@ -63,7 +65,7 @@ class Algorithm:
     def create(self, net, lr: float, cfg: TrainConfig, options: Any):  # pragma: no cover - interface
         raise NotImplementedError
 
-    def update(self, state, batch: dict, cfg: TrainConfig, step: int, options: Any) -> dict[str, float]:
+    def update(self, state, batch: dict, cfg: TrainConfig, step: int, options: Any) -> dict[str, Any]:
         raise NotImplementedError  # pragma: no cover - interface
 
     def policy(self, net, cem: CemConfig, **kwargs: Any):

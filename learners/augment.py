@@ -26,10 +26,11 @@ def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator) -> 
     if pad <= 0:
         return images
     b, h, w, c = images.shape
-    off = torch.randint(-pad, pad + 1, (b, 2), generator=generator)
-    rows = (torch.arange(h).unsqueeze(0) + off[:, :1]).clamp_(0, h - 1)
-    cols = (torch.arange(w).unsqueeze(0) + off[:, 1:]).clamp_(0, w - 1)
-    pixel = (torch.arange(b).view(b, 1, 1) * (h * w) + rows.view(b, h, 1) * w + cols.view(b, 1, w)).view(-1)
+    dev = images.device
+    off = torch.randint(-pad, pad + 1, (b, 2), generator=generator, device=generator.device)
+    rows = (torch.arange(h, device=dev).unsqueeze(0) + off[:, :1]).clamp_(0, h - 1)
+    cols = (torch.arange(w, device=dev).unsqueeze(0) + off[:, 1:]).clamp_(0, w - 1)
+    pixel = (torch.arange(b, device=dev).view(b, 1, 1) * (h * w) + rows.view(b, h, 1) * w + cols.view(b, 1, w)).view(-1)
     return images.reshape(b * h * w, c).index_select(0, pixel).view(b, h, w, c)
 
 
@@ -41,7 +42,7 @@ def colour_jitter(x: torch.Tensor, strength: float, generator: torch.Generator) 
     if strength <= 0:
         return x
     b, c = x.shape[:2]
-    u = torch.rand(b, 2 + c, generator=generator) * 2.0 - 1.0
+    u = torch.rand(b, 2 + c, generator=generator, device=generator.device) * 2.0 - 1.0
     brightness, contrast = 1.0 + strength * u[:, :1], 1.0 + strength * u[:, 1:2]
     gain = 1.0 + 0.5 * strength * u[:, 2:]
     mean = x.mean(dim=(1, 2, 3)).unsqueeze(1)

@@ -29,7 +29,7 @@ def noise_shape(batch: int, dims: int, cfg: CemConfig) -> tuple[int, int, int, i
 
 
 def noise_from_generator(batch: int, dims: int, cfg: CemConfig, generator: torch.Generator) -> torch.Tensor:
-    return torch.randn(noise_shape(batch, dims, cfg), generator=generator)
+    return torch.randn(noise_shape(batch, dims, cfg), generator=generator, device=generator.device)
 
 
 def noise_from_rngs(rngs: Sequence[np.random.Generator], dims: int, cfg: CemConfig) -> torch.Tensor:
@@ -53,7 +53,7 @@ def cem_maximize(
     std = noise.new_full((b, 1, a), cfg.init_std)
     best_score = noise.new_full((b,), -float("inf"))
     best_action = noise.new_zeros(b, a)
-    rows = torch.arange(b)
+    rows = torch.arange(b, device=noise.device)
     for it in range(iterations):
         cand = (mean + std * noise[:, it]).clamp_(-1.0, 1.0)
         s = score(cand)

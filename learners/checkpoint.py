@@ -99,7 +99,7 @@ def checkpoint_config(
 
 def save_checkpoint(path: Path, net: QNetwork, config: dict[str, Any], trainer_state: dict | None = None) -> Path:
     """Write a checkpoint folder at ``path`` atomically (replacing one already there)."""
-    weights = {k: v.detach().contiguous() for k, v in net.state_dict().items()}
+    weights = {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}  # from any device
     files: dict[str, bytes] = {
         MODEL_FILE: safetensors.torch.save(weights, metadata={"format": CHECKPOINT_FORMAT}),
         CONFIG_FILE: fmt.encode_config(config),
@@ -182,7 +182,8 @@ def load_trainer_state(path: Path) -> dict | None:
     if not f.is_file():
         return None
     try:
-        return torch.load(io.BytesIO(f.read_bytes()), weights_only=True)
+        # On the CPU whatever device wrote it: the learner moves each part to its own device when it loads it.
+        return torch.load(io.BytesIO(f.read_bytes()), map_location="cpu", weights_only=True)
     except Exception as e:
         raise CorruptDataError(
             f"checkpoint {path}: {TRAINER_FILE} cannot be read ({e}); delete this checkpoint "

@@ -195,6 +195,7 @@ class TrainConfig:
     augment_colour: float = 0.1  # colour jitter strength (brightness, contrast, per-channel gain); 0 disables
     seed: int = 0
     precision: str = "fp32"  # network passes: fp32, bf16 (CPU autocast; weights and optimiser stay fp32) or auto
+    device: str = "cpu"  # where the arithmetic runs: cpu, cuda or auto (CUDA when torch sees a GPU); learners/device.py
     log_every: int = 100  # steps between metric rows (CSV and TensorBoard)
     checkpoint_every: int = 2000  # steps between checkpoints (a killed run resumes from the last one)
     eval_every: int = 0  # steps between eval_fn calls; 0 disables
@@ -245,6 +246,8 @@ class TrainConfig:
             object.__setattr__(self, "shrink_perturb", (float(sp[0]), float(sp[1])))
         if self.precision not in ("fp32", "bf16", "auto"):
             raise ConfigError(f"precision {self.precision!r} is unknown; use fp32, bf16 or auto")
+        if self.device not in ("cpu", "cuda", "auto"):
+            raise ConfigError(f"device {self.device!r} is unknown; use cpu, cuda or auto")
         if not isinstance(self.learner, str) or not self.learner:
             raise ConfigError(f"learner {self.learner!r} must be a learner's name, e.g. qtopt or iql")
         if not isinstance(self.learner_options, dict):
@@ -294,6 +297,8 @@ class TrainConfig:
         d["cem"] = self.cem.to_dict()
         if d["precision"] == "fp32":
             del d["precision"]  # absent means fp32: configs (and checkpoint ids) made before the option hold
+        if d["device"] == "cpu":
+            del d["device"]  # absent means the CPU, for the same reason
         del d["tau" if self.tau is None else "polyak"]  # the stated one: configs made before tau keep their ids
         if d["learner"] == "qtopt" and not d["learner_options"]:
             del d["learner"], d["learner_options"]  # absent means QT-Opt: the same for the learner interface

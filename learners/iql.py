@@ -33,6 +33,7 @@ from .algorithm import Algorithm
 from .augment import prepare_images
 from .cem import active_actions
 from .config import TrainConfig
+from .device import generator, resolve_device, to_device
 from .networks import QNetwork, clone_frozen
 from .precision import autocast
 from .qtopt import polyak_update
@@ -96,14 +97,18 @@ class IQL(Algorithm):
     Options = IQLOptions
 
     def create(self, net: QNetwork, lr: float, cfg: TrainConfig, options: IQLOptions) -> IQLState:
-        fused = True if cfg.precision == "bf16" else None
+        device = resolve_device(cfg.device)
+        fused = True if cfg.precision == "bf16" or device == "cuda" else None
+        net = net.to(device)
         value = copy.deepcopy(net).train()
         opt = torch.optim.Adam(net.trainable_parameters(), lr=lr, weight_decay=cfg.weight_decay, fused=fused)
         value_opt = torch.optim.Adam(value.trainable_parameters(), lr=lr, weight_decay=cfg.weight_decay, fused=fused)
-        return IQLState(net, clone_frozen(net), value, opt, value_opt, torch.Generator().manual_seed(cfg.seed))
+        return IQLState(net, clone_frozen(net), value, opt, value_opt, generator(device, cfg.seed))
 
     def update(self, state: IQLState, batch: dict, cfg: TrainConfig, step: int, options: IQLOptions) -> dict:
         q, value, gen = state.online, state.value, state.generator
+        device = gen.device.type  # where the learner lives (cfg.device may still say auto)
+        batch = to_device(batch, device)
         image = prepare_images(batch[keys.OBS_IMAGE], cfg.augment_crop, cfg.augment_colour, gen)
         next_image = prepare_images(batch[keys.NEXT_OBS_IMAGE], cfg.augment_crop, cfg.augment_colour, gen)
         obs_state, next_state = batch[keys.OBS_STATE], batch[keys.NEXT_OBS_STATE]
@@ -113,9 +118,9 @@ class IQL(Algorithm):
         clip = cfg.grad_clip if cfg.grad_clip > 0 else float("inf")
 
         # V: the tau-expectile of the target Q over the data's actions.
-        with torch.no_grad(), autocast(cfg.precision):
+        with torch.no_grad(), autocast(cfg.precision, device):
             q_data = torch.sigmoid(state.polyak(image, obs_state, action).float())
-        with autocast(cfg.precision):
+        with autocast(cfg.precision, device):
             v = torch.sigmoid(value(image, obs_state, zero).float())
         v_loss = expectile_loss(q_data - v, options.expectile)
         state.value_optimizer.zero_grad(set_to_none=True)
@@ -124,14 +129,14 @@ class IQL(Algorithm):
         state.value_optimizer.step()
 
         # Q: the Bellman backup through V of the next state.
-        with torch.no_grad(), autocast(cfg.precision):
+        with torch.no_grad(), autocast(cfg.precision, device):
             next_value = torch.sigmoid(value(next_image, next_state, zero).float()) * (1.0 - done)
         target = reward + batch.get(keys.DISCOUNT, cfg.gamma) * next_value
         warm = step < options.v_warmup
-        with torch.set_grad_enabled(not warm), autocast(cfg.precision):
+        with torch.set_grad_enabled(not warm), autocast(cfg.precision, device):
             logits = q(image, obs_state, action).float()
         q_loss = F.binary_cross_entropy_with_logits(logits, target)
-        grad_norm = torch.zeros(())
+        grad_norm = torch.zeros((), device=logits.device)
         if not warm:
             state.optimizer.zero_grad(set_to_none=True)
             q_loss.backward()
@@ -140,7 +145,7 @@ class IQL(Algorithm):
             polyak_update(state.polyak, q, cfg.target_polyak)
 
         qs = torch.sigmoid(logits.detach())
-        live = done < 0.5
+        live = (done < 0.5).float()
         stats = torch.stack(
             [
                 q_loss.detach(),
@@ -149,9 +154,9 @@ class IQL(Algorithm):
                 qs.mean(),
                 target.mean(),
                 v.detach().mean(),
-                next_value[live].mean() if live.any() else next_value.new_tensor(0.0),
+                (next_value * live).sum() / live.sum().clamp_min(1.0),  # no host sync to count the live ones
             ]
-        ).tolist()
+        ).double()
         names = [
             "losses/q_loss",
             "losses/v_loss",
@@ -161,4 +166,4 @@ class IQL(Algorithm):
             "v/mean",
             "q/next_value_mean",
         ]
-        return dict(zip(names, stats))
+        return dict(zip(names, stats.unbind()))  # read when the loop logs

@@ -187,10 +187,11 @@ class QNetwork(nn.Module):
         """
         b, _, h, w = image.shape
         channels_last = not image.is_contiguous() and image.is_contiguous(memory_format=torch.channels_last)
-        dtype = torch.get_autocast_dtype("cpu") if torch.is_autocast_enabled("cpu") else image.dtype
+        device = image.device.type
+        dtype = torch.get_autocast_dtype(device) if torch.is_autocast_enabled(device) else image.dtype
         extra = 0 if self.coords is None else self.coords.shape[1]
         fmt = torch.channels_last if channels_last else torch.contiguous_format
-        x = torch.empty((b, image.shape[1] + extra, h, w), dtype=dtype, memory_format=fmt)
+        x = torch.empty((b, image.shape[1] + extra, h, w), dtype=dtype, memory_format=fmt, device=image.device)
         pixels = x[:, : image.shape[1]]
         if dtype == image.dtype:
             torch.sub(image, 0.5, out=pixels)

@@ -13,7 +13,15 @@ computed for its state alone (batch of one), so its actions do not depend on
 which episodes share its batch, nor on the batch size or the thread count: a
 batched convolution or matrix product rounds differently with the batch
 size and the threads (Q-values change in the seventh digit), which could
-flip CEM's choice between two near-equal candidates.  For worker processes,
+flip CEM's choice between two near-equal candidates.
+
+On a GPU (``device="cuda"``) one state at a time would leave the device idle
+(a search costs the same 1.6 ms for 1 state or 64), so the policy acts in
+batches there: the batch's states are encoded together and one CEM call
+searches all of them.  Each episode's noise still comes from its own
+generator, so its episodes are reproducible for a given seed, device and
+batch size (``nsl eval --num-envs``); ``batched=True`` asks for the same on
+the CPU.  For worker processes,
 pass ``functools.partial(load_policy, checkpoint_dir)``: it pickles as a path
 and loads the checkpoint inside the worker.  :meth:`CEMPolicy.describe`
 records the checkpoint by its content id, never by its path, because it goes
@@ -40,8 +48,8 @@ from nsl.errors import ConfigError
 
 from .augment import to_float
 from .cem import cem_maximize, full_actions, noise_from_rngs
-from .checkpoint import checkpoint_id, load_checkpoint
 from .config import CemConfig, TrainConfig
+from .device import resolve_device
 from .networks import QNetwork
 from .precision import autocast, resolve_precision
 
@@ -50,7 +58,8 @@ class CEMPolicy:
     """Greedy CEM over a Q-network.
 
     ``action_noise`` adds Gaussian noise of that standard deviation (in action units, clipped to [-1, 1]) to every
-    greedy action; then, with probability ``epsilon`` per step, a uniform random action replaces it.
+    greedy action; then, with probability ``epsilon`` per step, a uniform random action replaces it.  ``device``
+    is where the network runs; ``batched`` (default: on a GPU only) searches the batch's states in one call.
     """
 
     needs_privileged = False
@@ -64,6 +73,8 @@ class CEMPolicy:
         info: dict[str, Any] | None = None,
         action_noise: float = 0.0,
         precision: str = "fp32",
+        device: str = "cpu",
+        batched: bool | None = None,
     ):
         if not 0.0 <= epsilon <= 1.0:
             raise ConfigError(f"epsilon {epsilon!r} is out of range; use 0..1 (e.g. 0.1 for exploration)")
@@ -72,20 +83,22 @@ class CEMPolicy:
                 f"action_noise {action_noise!r} is out of range; use a standard deviation in 0..2 "
                 "action units (e.g. 0.3)"
             )
-        self.net = net.eval()
+        self.device = resolve_device(device)
+        self.batched = self.device != "cpu" if batched is None else bool(batched)
+        self.net = net.to(self.device).eval()
         self.cem = cem or CemConfig()
         self.epsilon = float(epsilon)
         self.action_noise = float(action_noise)
         self.name = name
         self.info = dict(info or {})
-        self.precision = resolve_precision(precision)
+        self.precision = resolve_precision(precision, self.device)
 
     def q_values(self, obs: dict[str, np.ndarray], actions: np.ndarray) -> np.ndarray:
         """P(success) (B,) of environment actions (B, 6) in states ``obs``."""
         image, state = self._inputs(obs)
-        with torch.inference_mode(), autocast(self.precision):
-            act = torch.from_numpy(np.asarray(actions, np.float32)[:, list(self.net.cfg.action_dims)])
-            return torch.sigmoid(self.net(image, state, act).float()).numpy()
+        with torch.inference_mode(), autocast(self.precision, self.device):
+            act = torch.from_numpy(np.asarray(actions, np.float32)[:, list(self.net.cfg.action_dims)]).to(self.device)
+            return torch.sigmoid(self.net(image, state, act).float()).cpu().numpy()
 
     def _inputs(self, obs: dict[str, np.ndarray]) -> tuple[torch.Tensor, torch.Tensor]:
         image = np.asarray(obs["image"])
@@ -94,26 +107,33 @@ class CEMPolicy:
             raise ConfigError(
                 f"policy {self.name}: images must be uint8 (B, {n}, {n}, 3); got {image.dtype} {image.shape}"
             )
-        return to_float(torch.from_numpy(image)), torch.from_numpy(np.asarray(obs["state"], np.float32))
+        pixels, state = torch.from_numpy(image), torch.from_numpy(np.asarray(obs["state"], np.float32))
+        return to_float(pixels.to(self.device)), state.to(self.device)
 
     def greedy(self, obs: dict[str, np.ndarray], rngs: list[np.random.Generator]) -> tuple[np.ndarray, np.ndarray]:
         """CEM's best active actions (B, A) and their logits (B,); state i uses ``rngs[i]`` only.
 
-        Each state is encoded and searched alone, so its result is the same bits
-        whatever the other states of the batch, the batch size or torch's thread
-        count: every kernel sees the same shapes and the same inputs.
+        Unbatched (the CPU's default), each state is encoded and searched alone,
+        so its result is the same bits whatever the other states of the batch,
+        the batch size or torch's thread count: every kernel sees the same
+        shapes and the same inputs.  Batched, one search covers them all.
         """
         image, state = self._inputs(obs)
         if len(rngs) != len(image):
             raise ConfigError(f"policy {self.name}: got {len(rngs)} random generators for {len(image)} observations")
         dims = len(self.net.cfg.action_dims)
-        noise = noise_from_rngs(rngs, dims, self.cem)
+        noise = noise_from_rngs(rngs, dims, self.cem).to(self.device)
+        if self.batched:
+            with torch.inference_mode(), autocast(self.precision, self.device):
+                ctx = self.net.encode(image, state)
+                b, s = cem_maximize(functools.partial(self._score, ctx), noise, self.cem)
+            return b.cpu().numpy(), s.cpu().numpy()
         best, logits = np.zeros((len(image), dims), np.float32), np.zeros(len(image), np.float32)
-        with torch.inference_mode(), autocast(self.precision):
+        with torch.inference_mode(), autocast(self.precision, self.device):
             for i in range(len(image)):
                 ctx = self.net.encode(image[i : i + 1], state[i : i + 1])
                 b, s = cem_maximize(functools.partial(self._score, ctx), noise[i : i + 1], self.cem)
-                best[i], logits[i] = b[0].numpy(), s[0].item()
+                best[i], logits[i] = b[0].cpu().numpy(), s[0].item()
         return best, logits
 
     def _score(self, ctx: list[dict], candidates: torch.Tensor) -> torch.Tensor:
@@ -139,6 +159,10 @@ class CEMPolicy:
         noise: dict[str, Any] = {"action_noise": self.action_noise} if self.action_noise > 0 else {}
         if self.precision != "fp32":  # absent at their defaults: the hashes of datasets made before them hold
             noise["precision"] = self.precision
+        if self.device != "cpu":
+            noise["device"] = self.device
+        if self.batched:
+            noise["batched"] = True  # its actions depend on the batch size (nsl collect --num-envs)
         return {
             "policy": "cem",
             "name": self.name,
@@ -154,14 +178,17 @@ def load_policy(
     epsilon: float = 0.0,
     action_noise: float = 0.0,
     precision: str = "fp32",
+    device: str = "cpu",
     **cem_overrides: Any,
 ) -> CEMPolicy:
     """The policy of a checkpoint folder (its learner's; a :class:`CEMPolicy` for the built-in ones); CEM settings
     default to the checkpoint's training ones.
 
-    ``precision`` is the precision it acts in (``fp32``, ``bf16`` or ``auto``), whatever it was trained in.
+    ``precision`` is the precision it acts in (``fp32``, ``bf16`` or ``auto``) and ``device`` where (``cpu``,
+    ``cuda`` or ``auto``), whatever it was trained in and on.
     """
-    from .registry import find_learner
+    from .checkpoint import checkpoint_id, load_checkpoint  # here: acting alone needs no checkpoint files (a GPU
+    from .registry import find_learner  # machine with torch only runs nsl bench eval --device cuda)
 
     ckpt = load_checkpoint(Path(checkpoint_dir))
     training = TrainConfig.from_dict(ckpt.config["training"])
@@ -181,6 +208,8 @@ def load_policy(
         "action_noise": action_noise,
         "precision": precision,
     }
+    if device != "cpu":
+        kwargs["device"] = device  # only when asked: a plugin learner's own policy may not take it
     return acting_policy(algo, ckpt.net, cem, **kwargs)
 
 

@@ -1,4 +1,4 @@
-"""Numeric precision of the Q-network's passes: float32, or bfloat16 on CPUs that compute it natively.
+"""Numeric precision of the Q-network's passes: float32, or bfloat16 where the hardware computes it natively.
 
 Weights, gradients and the optimiser's state stay float32 in both.  With
 ``bf16`` the forward and backward passes run under
@@ -8,6 +8,10 @@ float32; the log loss and the Bellman targets are computed in float32.
 
 ``auto`` resolves to ``bf16`` where the CPU supports it and to ``fp32``
 elsewhere; asking for ``bf16`` on a CPU without it is an error.
+
+On a GPU (``learners/device.py``) ``bf16`` autocasts to bfloat16 on CUDA where
+the GPU has it (every NVIDIA GPU since Ampere), ``auto`` is ``bf16`` there,
+and float32 convolutions use TensorFloat-32, PyTorch's default for cuDNN.
 
 ``NSL_BF16=0`` in the environment makes nsl treat the CPU as one without
 bfloat16 (``auto`` is then ``fp32``): the common case on rented cloud machines,
@@ -40,10 +44,16 @@ def bf16_supported() -> bool:
     return any(bool(getattr(cpu, name, lambda: False)()) for name in checks)
 
 
-def resolve_precision(precision: str) -> str:
-    """``fp32``, ``bf16`` or ``auto`` -> ``fp32`` or ``bf16`` for this machine (one-line errors otherwise)."""
+def resolve_precision(precision: str, device: str = "cpu") -> str:
+    """``fp32``, ``bf16`` or ``auto`` -> ``fp32`` or ``bf16`` for this machine's ``device`` (``cpu`` or ``cuda``;
+    one-line errors otherwise)."""
     if precision not in PRECISIONS:
         raise ConfigError(f"precision {precision!r} is unknown; use one of {', '.join(PRECISIONS)}")
+    if device == "cuda":
+        has = bool(torch.cuda.is_bf16_supported())
+        if precision == "bf16" and not has:
+            raise ConfigError("precision bf16 needs a GPU with bfloat16 (Ampere or newer); use --precision fp32")
+        return ("bf16" if has else "fp32") if precision == "auto" else precision
     if precision == "auto":
         return "bf16" if bf16_supported() else "fp32"
     if precision == "bf16" and not bf16_supported():
@@ -55,10 +65,11 @@ def resolve_precision(precision: str) -> str:
 
 
 @contextlib.contextmanager
-def autocast(precision: str) -> Iterator[None]:
-    """The passes inside run in ``precision`` (``fp32``: unchanged; ``bf16``: CPU autocast to bfloat16)."""
+def autocast(precision: str, device: str = "cpu") -> Iterator[None]:
+    """The passes inside run in ``precision`` (``fp32``: unchanged; ``bf16``: autocast to bfloat16 on ``device``)."""
     if precision == "bf16":
-        with torch.autocast("cpu", dtype=torch.bfloat16):
+        # No cast cache on a GPU: a captured CUDA graph must recompute the weights' casts on every replay.
+        with torch.autocast(device, dtype=torch.bfloat16, cache_enabled=device == "cpu"):
             yield
     else:
         yield

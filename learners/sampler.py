@@ -4,6 +4,7 @@ A sampler is any object with::
 
     sample(batch_size: int, rng: numpy.random.Generator) -> dict[str, np.ndarray]
     describe() -> dict          # data versions and weights, recorded in checkpoints
+    tables() -> list            # optional: the transitions as arrays, for a GPU to hold (learners/cuda_graph.py)
 
 ``sample`` returns a batch keyed by ``nsl.keys``: ``OBS_IMAGE`` (B, H, W, 3)
 uint8, ``OBS_STATE`` (B, STATE_DIM) float32, ``ACTION`` (B, ACTION_DIM)
@@ -160,6 +161,23 @@ class ArraySampler:
             keys.NEXT_OBS_IMAGE: self.images[j],
             keys.NEXT_OBS_STATE: self.states[j],
         }
+
+    def tables(self) -> list[tuple[dict[str, np.ndarray], float]]:
+        """The transitions as arrays (``images`` and the frame indices ``obs`` and ``next`` into them, then the
+        per-transition columns), with weight 1: what a GPU copies to sample there."""
+        i = self.indices
+        j = self.next_index[i]
+        table = {
+            "images": self.images,
+            "obs": i,
+            "next": j,
+            keys.OBS_STATE: self.states[i],
+            keys.NEXT_OBS_STATE: self.states[j],
+            keys.ACTION: self.actions[i],
+            keys.REWARD: self.rewards[i],
+            keys.DONE: self.dones[i],
+        }
+        return [(table, 1.0)]
 
     def describe(self) -> dict[str, Any]:
         rewarded = float(self.rewards[self.indices].sum())

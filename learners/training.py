@@ -61,6 +61,7 @@ from .checkpoint import (
     write_json,
 )
 from .config import FINE_TUNE_CONSERVATIVE, FINE_TUNE_LR_FACTOR, METHODS, NetConfig, TrainConfig
+from .device import resolve_device
 from .networks import QNetwork, freeze_trunk, grow_column, reinit_head, shrink_perturb
 from .policy import CEMPolicy, acting_policy
 from .precision import resolve_precision
@@ -195,10 +196,12 @@ def train(
         )
     parent = load_checkpoint(Path(init_checkpoint)) if init_checkpoint is not None else None
     lr = resolve_lr(config, method, parent)
+    device = resolve_device(config.device)
     resolved = config.replace(
         lr=lr,
         conservative=resolve_conservative(config, parent, algo),
-        precision=resolve_precision(config.precision),
+        precision=resolve_precision(config.precision, device),
+        device=device,
         learner_options=algo.option_dict(options),
     )
     model = initial_network(method, parent, net or (None if parent else NetConfig()), config.seed)
@@ -280,7 +283,7 @@ def train(
             bar.update(1)
             if step % config.log_every == 0 or step == config.steps:
                 dt = time.perf_counter() - t0
-                last_row = {k: v / n0 for k, v in window.items()} | {
+                last_row = {k: float(v) / n0 for k, v in window.items()} | {  # the device's metrics, read here
                     "charts/steps_per_s": n0 / max(dt, 1e-9),
                     "charts/lr": step_lr,
                 }
@@ -314,11 +317,13 @@ def _evaluate(
     log: _Logger,
     evals: list,
 ) -> bool:
-    snapshot = copy.deepcopy(online).eval()
+    # The simulator's policy acts on the CPU (its workers must not inherit a CUDA context); a run trained on a GPU
+    # is evaluated in float32 there, as the study evaluates every checkpoint.
+    snapshot = copy.deepcopy(online).cpu().eval()
     kwargs: dict[str, Any] = {
         "name": f"{out.name}@{step}",
         "info": {"run": str(out), "step": step},
-        "precision": cfg.precision,
+        "precision": cfg.precision if cfg.device == "cpu" else "fp32",
     }
     policy = acting_policy(algo, snapshot, cfg.cem, **kwargs)
     result = dict(eval_fn(step, policy) or {})

@@ -56,7 +56,12 @@ def collect(
 
     env_config = EnvConfig(shift=cfg.shift, split=cfg.split, image_size=cfg.image_size, engine=cfg.engine)
     make_policy = policy_factory(
-        cfg.policy, env_config, epsilon=cfg.epsilon, action_noise=cfg.action_noise, precision=cfg.precision
+        cfg.policy,
+        env_config,
+        epsilon=cfg.epsilon,
+        action_noise=cfg.action_noise,
+        precision=cfg.precision,
+        device=cfg.device,
     )
     spec = {"env": env_config.to_dict(), "policy": make_policy().describe(), "policy_ref": cfg.policy, "seed": cfg.seed}
     coll = api.Collection.begin(
@@ -159,7 +164,12 @@ def _collect(
 def _argv(cfg: CollectConfig) -> list[str]:
     out = []
     for k, v in asdict(cfg).items():
-        if (k == "action_noise" and not v) or (k == "precision" and v == "fp32") or (k == "engine" and v == "mujoco"):
+        if (
+            (k == "action_noise" and not v)
+            or (k == "precision" and v == "fp32")
+            or (k == "engine" and v == "mujoco")
+            or (k, v) == ("device", "cpu")
+        ):
             continue  # options added later: commands without them are recorded as before
         out += [f"--{k.replace('_', '-')}", str(v)]
     return out

@@ -132,6 +132,7 @@ def _online(config: OnlineConfig, name: str, progress: bool) -> OnlineResult:
                     learner=config.learner,
                     target_shift=config.target,
                     precision=config.precision,
+                    device=config.device,
                 ),
                 progress=progress,
             )

@@ -25,6 +25,7 @@ from nsl.learners.config import (
 )
 
 PRECISIONS = ("fp32", "bf16", "auto")  # nsl.learners.precision.PRECISIONS (that module loads torch)
+DEVICES = ("cpu", "cuda", "auto")  # nsl.learners.device.DEVICES (that module loads torch)
 ENGINES = ("mujoco", "pybullet")  # nsl.collectors.ENGINES (that package loads gymnasium)
 ENGINE_HELP = "physics engine and renderer: mujoco or pybullet (the same task, objects and scenes per seed)"
 METHOD_HELP = (
@@ -74,6 +75,12 @@ class CollectConfig:
         choices=PRECISIONS,
     )
     engine: str = option("mujoco", ENGINE_HELP + "; recorded in the dataset", choices=ENGINES)
+    device: str = option(
+        "cpu",
+        "with a ckpt: policy, where its network runs: cpu (one state at a time), cuda (the --num-envs states "
+        "searched in one batch on the GPU) or auto (cuda when torch sees a GPU); recorded in the dataset",
+        choices=DEVICES,
+    )
 
     def __post_init__(self) -> None:
         for name in ("shift", "episodes", "policy", "data"):
@@ -245,9 +252,15 @@ class TrainOptions:
     workers: int = option(1, "evaluation worker processes")
     precision: str = option(
         TrainConfig.precision,
-        "the network's passes: fp32, or bf16 (CPU bfloat16 autocast; weights and optimiser stay fp32), or auto "
-        "(bf16 where the CPU has it); recorded in the checkpoint",
+        "the network's passes: fp32, or bf16 (bfloat16 autocast; weights and optimiser stay fp32), or auto "
+        "(bf16 where the CPU or GPU has it); recorded in the checkpoint",
         choices=PRECISIONS,
+    )
+    device: str = option(
+        "auto",
+        "where the gradient steps run: cpu, cuda, or auto (cuda when torch sees a GPU); a GPU run is recorded "
+        "in the checkpoint, and its early-stopping evaluations act on the CPU",
+        choices=DEVICES,
     )
 
 
@@ -307,6 +320,12 @@ class OnlineConfig:
         "every round's training passes: fp32, bf16 (CPU bfloat16 autocast) or auto (bf16 where the CPU has it); "
         "collection and evaluation act in fp32",
         choices=PRECISIONS,
+    )
+    device: str = option(
+        "auto",
+        "where every round's training runs: cpu, cuda, or auto (cuda when torch sees a GPU); collection and "
+        "evaluation act on the CPU",
+        choices=DEVICES,
     )
     engine: str = option(
         "mujoco",

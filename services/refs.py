@@ -29,21 +29,30 @@ def pinned(ref: str):
 
 
 def policy_factory(
-    ref: str, env_config, epsilon: float = 0.0, action_noise: float = 0.0, precision: str = "fp32"
+    ref: str,
+    env_config,
+    epsilon: float = 0.0,
+    action_noise: float = 0.0,
+    precision: str = "fp32",
+    device: str = "cpu",
 ) -> Callable:
     """``random`` | ``oracle[:NOISE]`` | ``ckpt:NAME[@...]`` -> a picklable policy factory.
 
     A checkpoint becomes its CEM policy (``nsl.learners.load_policy``), built
     once in each worker; ``epsilon`` adds epsilon-greedy exploration,
     ``action_noise`` Gaussian noise on every action, and ``precision`` is what
-    its network computes in (``auto`` is resolved here, once, for every worker).
+    its network computes in and ``device`` where (``auto`` is resolved here, once, for every worker).  On a
+    GPU each worker process (started by a fork server, never forked from a process that holds CUDA) acts in
+    batches there.
     """
     if ref.startswith("ckpt:") or ref == "base":
         from nsl.catalog import Catalog
         from nsl.learners import load_policy
+        from nsl.learners.device import resolve_device
         from nsl.learners.precision import resolve_precision
 
         entry = pinned(ref)
+        device = resolve_device(device)
         if entry is None:
             with Catalog() as cat:
                 entry = resolve_init(cat, ref)
@@ -52,7 +61,8 @@ def policy_factory(
             str(entry.path),
             epsilon=epsilon,
             action_noise=action_noise,
-            precision=resolve_precision(precision),
+            precision=resolve_precision(precision, device),
+            **({} if device == "cpu" else {"device": device}),
         )
     else:
         from nsl.collectors import scripted_policy

@@ -227,6 +227,9 @@ def _train(
         steps = learner_config.FINE_TUNE_STEPS
     if steps < 1:
         raise ConfigError(f"--steps {steps} must be at least 1")
+    from nsl.learners.device import resolve_device
+
+    resolve_device(o.device)  # --device cuda on a machine without a GPU: one line, before any data is read
     from nsl.eval.config import CRITERIA
 
     if o.criterion not in CRITERIA:
@@ -284,6 +287,7 @@ def _train(
         weight_decay=o.weight_decay,
         shrink_perturb=sp,
         precision=o.precision,
+        device=o.device,
         **augment,
     )
     sampler = api.make_sampler(sources, n_step=config.n_step, gamma=config.gamma)

@@ -343,6 +343,7 @@ def _train(unit: Unit, workers: int, progress: bool, register: bool = True) -> d
         eval_scenes=m.get("seed", 0),
         workers=workers,
         precision=p.get("precision", "fp32"),
+        device=p.get("device", "auto"),
         learner=p.get("learner", "qtopt"),
         **({"holdout": m["holdout"]} if m.get("holdout") else {}),
     )

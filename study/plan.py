@@ -11,7 +11,7 @@ one ``nsl.errors`` exception, raised before any work starts.
 Sections (see ``study/plans/small.toml`` for a commented example)::
 
     name, base, shifts                 the study's name, base checkpoint, challenge shifts
-    learner, precision                 how every training unit learns (default qtopt, fp32)
+    learner, precision, device         how every training unit learns (default qtopt, fp32, auto: a GPU if any)
     [base_data]                        base-task data: the checkpoint's own (hash-checked) or listed here
     [collect]                          target data: episodes per shift, exploration epsilon, seed
     [eval]                             evaluation episodes and scene seed (every table)
@@ -197,6 +197,8 @@ class Plan:
         TrainConfig.precision
     )  # training units' arithmetic: fp32, bf16 (CPU bfloat16 autocast) or auto (bf16 if the CPU
     # has it); evaluations and collections act in fp32, which is faster for CEM's one-state searches on the CPU
+    device: str = "auto"  # training units' device: cpu, cuda, or auto (cuda on a node whose torch sees a GPU);
+    # collections and evaluations act on the CPU cores
     learner: str = (
         TrainConfig.learner
     )  # every training unit's learner (nsl train --learner): qtopt, iql[:OPTS] or a plugin's
@@ -370,10 +372,12 @@ def validate(plan: Plan) -> None:
     if len(set(names)) != len(names):
         raise ConfigError(f"plan shifts {list(plan.shifts)} repeat a shift")
     _positive(plan.checkpoint_every, "checkpoint_every")
-    from nsl.services.options import PRECISIONS
+    from nsl.services.options import DEVICES, PRECISIONS
 
     if plan.precision not in PRECISIONS:
         raise ConfigError(f"plan precision = {plan.precision!r} is unknown; use one of {', '.join(PRECISIONS)}")
+    if plan.device not in DEVICES:
+        raise ConfigError(f"plan device = {plan.device!r} is unknown; use one of {', '.join(DEVICES)}")
     from nsl.learners.registry import learner_names, parse_learner
 
     learner, _ = parse_learner(str(plan.learner))

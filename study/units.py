@@ -249,6 +249,7 @@ class _Builder:
                     # fp32 is left out, so the units of plans made before the setting keep their parameters
                     **({} if self.plan.precision == "fp32" else {"precision": self.plan.precision}),
                     **({} if self.plan.learner == "qtopt" else {"learner": self.plan.learner}),
+                    **({} if self.plan.device == "auto" else {"device": self.plan.device}),
                 },
                 tuple(deps),
             )

@@ -45,6 +45,7 @@ CLOSED = {
     "criterion": {"eval", "softopc", "auc", "td", "qmean", "fqe"},
     "precision": {"fp32", "bf16", "auto"},
     "engine": {"mujoco", "pybullet"},
+    "device": {"cpu", "cuda", "auto"},
 }
 
 
@@ -111,6 +112,10 @@ def test_closed_sets_match_the_libraries():
     from nsl.services.options import PRECISIONS as OPTION_PRECISIONS
 
     assert OPTION_PRECISIONS == PRECISIONS
+    from nsl.learners.device import DEVICES
+    from nsl.services.options import DEVICES as OPTION_DEVICES
+
+    assert OPTION_DEVICES == DEVICES
     from nsl.collectors import ENGINES
     from nsl.services.options import ENGINES as OPTION_ENGINES
 

@@ -17,6 +17,14 @@ HELP = "episodes/s of CEM-policy evaluation with 1 and 2 worker processes"
 
 def add_arguments(p) -> None:
     p.add_argument("--episodes", type=int, default=None, help="episodes per measurement (default 320, quick 48)")
+    p.add_argument(
+        "--device",
+        default="cpu",
+        choices=("cpu", "cuda", "auto"),
+        help="cpu: evaluation episodes/s (above); cuda (or auto with a GPU): the CEM policy's acting on the GPU, "
+        "states/s searched one a call against --states a call (no simulator needed)",
+    )
+    p.add_argument("--states", type=int, default=64, help="with --device cuda: states per batched call")
 
 
 def _make_checkpoint(folder: Path) -> Path:
@@ -45,6 +53,13 @@ def _rate(make_policy, episodes: int, workers: int) -> tuple[float, float]:
 
 
 def run(args) -> dict:
+    from nsl.learners.device import resolve_device
+
+    device = resolve_device(getattr(args, "device", "cpu"))
+    if device != "cpu":
+        from ._device import acting_figures
+
+        return acting_figures(device, states=args.states, quick=args.quick)
     from nsl.learners import load_policy
 
     episodes = args.episodes or (48 if args.quick else 320)

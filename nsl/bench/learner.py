@@ -48,6 +48,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--baseline-steps", type=int, default=0, help="timed steps of the plain batched step (0 = 5, with --quick 2)"
     )
     p.add_argument("--threads", type=int, default=0, help="torch threads (0 = torch's choice)")
+    p.add_argument(
+        "--device",
+        default="cpu",
+        choices=("cpu", "cuda", "auto"),
+        help="cpu: nsl's step against a plain batched step (above); cuda (or auto with a GPU): nsl's step on the "
+        "GPU, eager and as one CUDA graph, at batch 64 and 1,024 in fp32 and bf16, with the profiler's kernel "
+        "time, the busy fraction and the matmul peaks (needs only torch)",
+    )
 
 
 def _synthetic_sampler(n: int = 512, seed: int = 0):
@@ -168,6 +176,14 @@ def _plain_batched_step(learner, batch, cfg, step: int, reuse_trunk: bool = Fals
 def run(args: argparse.Namespace) -> dict:
     import numpy as np
     import torch
+
+    from nsl.learners.device import resolve_device
+
+    device = resolve_device(getattr(args, "device", "cpu"))
+    if device != "cpu":
+        from ._device import learner_figures
+
+        return learner_figures(device, steps=args.steps or (30 if args.quick else 200), quick=args.quick)
 
     threads = torch.get_num_threads()
     if args.threads:

@@ -35,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     for name in ("workers", "seed", "epsilon"):
         add_field(p, c, name)
     add_field(p, c, "action_noise", metavar="STD")
-    for name in ("num_envs", "split", "image_size", "episodes_per_file", "precision", "engine"):
+    for name in ("num_envs", "split", "image_size", "episodes_per_file", "precision", "engine", "device"):
         add_field(p, c, name)
     p.add_argument("--restart", action="store_true", help="discard an unfinished collection of this dataset")
     add_wait(p, "dataset")

@@ -29,6 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_field(p, c, "method", choices=("ft", "new_head"))
     add_field(p, c, "learner")
     add_field(p, c, "precision")
+    add_field(p, c, "device")
     add_field(p, c, "engine")
     add_wait(p, "run")
     p.set_defaults(func=run, config=OnlineConfig)

@@ -55,6 +55,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_field(p, c, "crop", type=int)
     add_field(p, c, "net", action="append")
     add_field(p, c, "precision")
+    add_field(p, c, "device")
     add_wait(p, "run")
     es = p.add_argument_group("early stopping (evaluates every --eval-every steps)")
     for name in ("eval_every", "eval_episodes", "base_episodes", "target_shift", "patience"):

@@ -667,3 +667,27 @@ def test_iql_pre_trains_and_fine_tunes_from_the_command_line_and_its_checkpoint_
     assert "learner 'iql' has no option(s) ['tau']" in capsys.readouterr().err
     assert run_cli("train", *base, "--learner", "sac", "--name", "sac") == 2
     assert "unknown learner 'sac'" in capsys.readouterr().err
+
+
+def test_the_gpu_fine_tune_script_exports_trains_and_catalogues_with_torch_alone(pipeline, tmp_path, monkeypatch):
+    """scripts/gpu/finetune.py: the data mix and the parent as arrays; the recipe's steps from them (here on the
+    CPU, on the GPU machine with --device cuda); the result catalogued under its parent with its data."""
+    import runpy
+    import sys
+
+    script = str(Path(__file__).resolve().parents[2] / "scripts" / "gpu" / "finetune.py")
+    folder, weights = tmp_path / "gpu", tmp_path / "ft.pt"
+
+    def call(*argv: str) -> None:
+        monkeypatch.setattr(sys, "argv", [script, *argv])
+        runpy.run_path(script, run_name="__main__")
+
+    call("export", str(folder), "--base", "ckpt:base-tiny", "--data", "grasp-base=0.5", "--data", "grasp-harsh=0.5")
+    call("train", str(folder), "--seed", "1", "--steps", "3", "--device", "cpu", "--out", str(weights))
+    call("import", str(weights), "--data", str(folder), "--name", "gpu-ft")
+    with Catalog() as cat:
+        child = cat.resolve_checkpoint("ckpt:gpu-ft")
+        assert child.parent == cat.resolve_checkpoint("ckpt:base-tiny@latest").id
+        assert [(d.dataset, d.weight) for d in child.data] == [("grasp-base", 0.5), ("grasp-harsh", 0.5)]
+    config = json.loads((Path(child.path) / "config.json").read_text())
+    assert config["step"] == 3 and config["training"]["seed"] == 1 and config["training"]["conservative"] == 0.1

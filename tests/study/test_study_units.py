@@ -188,6 +188,20 @@ def test_the_plans_precision_reaches_every_training_unit_and_fp32_leaves_the_uni
         _units('precision = "fp16"\n' + MINI_PLAN)
 
 
+def test_the_plans_device_reaches_every_training_unit_and_auto_leaves_the_units_as_they_were():
+    import pytest
+
+    from nsl.errors import ConfigError
+
+    _, auto = _units()
+    assert all("device" not in u.params for u in auto.values())
+    _, cuda = _units('device = "cuda"\n' + MINI_PLAN)
+    assert {u.params["device"] for u in cuda.values() if u.kind == "train"} == {"cuda"}
+    assert all("device" not in u.params for u in cuda.values() if u.kind != "train")  # acting stays on the CPU
+    with pytest.raises(ConfigError, match="plan device = 'gpu' is unknown; use one of cpu, cuda, auto"):
+        _units('device = "gpu"\n' + MINI_PLAN)
+
+
 def test_the_plans_learner_reaches_every_training_unit_and_qtopt_leaves_the_units_as_they_were():
     import pytest
 
