@@ -346,6 +346,7 @@ def _train(unit: Unit, workers: int, progress: bool, register: bool = True) -> d
         device=p.get("device", "auto"),
         learner=p.get("learner", "qtopt"),
         **({"holdout": m["holdout"]} if m.get("holdout") else {}),
+        **({"criterion": m["criterion"]} if m.get("criterion") else {}),  # fqe: FQE's estimate on the curve too
     )
     result = train(
         options,

@@ -18,7 +18,7 @@ Sections (see ``study/plans/small.toml`` for a commented example)::
     [finetune]                         Table 5.2: tiers, steps, seeds, baselines at the top tier
     [continual]                        Table 5.3: the sequence, episodes and steps per stage
     [curves]                           Figs. 5.4/5.9: methods on one shift, success over steps, seeds
-    [early_stop]                       Fig. 5.7: one shift trained past its best point; criteria
+    [early_stop]                       Fig. 5.7: shifts trained past their best point (seeds, extra runs); criteria
     [online]                           Figs. 5.10/5.11: online fine-tuning in rounds, round 1's method, ratios
     [supervised]                       Table 5.2's ImageNet column: the supervised features the baselines
                                        ``supervised`` and ``supervised_frozen`` fine-tune (nsl features)
@@ -37,7 +37,18 @@ from nsl.learners.config import FINE_TUNE_STEPS, TrainConfig
 from nsl.scenes import REPORTING_SCENES, SELECTION_SCENES
 from nsl.services.options import FeaturesConfig
 
-SHIPPED = ("tiny", "small", "full", "full-seeds", "full-sequence", "headline", "cross-engine", "online", "paper")
+SHIPPED = (
+    "tiny",
+    "small",
+    "full",
+    "full-seeds",
+    "full-sequence",
+    "headline",
+    "cross-engine",
+    "early-stop",
+    "online",
+    "paper",
+)
 BASE_DATA_SOURCES = ("checkpoint", "plan")
 # Baselines that are not a fine-tuning method of their own: what each one leaves out separates a cause of the gain.
 #   scratch_target  random initialisation, trained on the target data alone (no base half)
@@ -142,7 +153,20 @@ class Curves:
 
 
 @dataclass(frozen=True)
+class EarlyStopRun:
+    """One more long fine-tune of [early_stop] (``[[early_stop.runs]]``): a shift at a tier, with the plan's base
+    data or only the base datasets it names (e.g. the README quick start's oracle episodes)."""
+
+    shift: str
+    episodes: int
+    base: tuple[str, ...] = ()  # names from [[base_data.datasets]]; empty: all of them, as every other unit
+
+
+@dataclass(frozen=True)
 class EarlyStop:
+    """Fig. 5.7: fine-tunes trained far past their best point, evaluated every ``every`` steps on the selection
+    scenes of their shift and of the base task, each evaluated checkpoint kept; criteria choose on the curves."""
+
     shift: str = "offset_gripper"
     episodes: int = 400  # target episodes (a tier of the shift's collection); holdout is taken from them
     steps: int = 3000  # far past the best point
@@ -152,6 +176,17 @@ class EarlyStop:
     patience: int = 4  # evaluations without improvement before a criterion stops (replayed on the full curve)
     holdout: float = 0.2  # fraction of the target episodes held out for the offline criteria
     seed: int = 0
+    shifts: tuple[str, ...] = ()  # several shifts at `episodes` (empty: `shift` alone); the first is the report's
+    seeds: tuple[int, ...] = ()  # training seeds of every run (empty: `seed` alone)
+    runs: tuple[EarlyStopRun, ...] = ()  # more runs, each with every seed
+
+    @property
+    def all_shifts(self) -> tuple[str, ...]:
+        return self.shifts or (self.shift,)
+
+    @property
+    def all_seeds(self) -> tuple[int, ...]:
+        return self.seeds or (self.seed,)
 
 
 @dataclass(frozen=True)
@@ -248,6 +283,10 @@ def _build(cls: type, d: Any, where: str):
             if not isinstance(v, list):
                 raise ConfigError(f"plan [{where}] datasets must be an array of tables ([[base_data.datasets]])")
             v = tuple(_build(BaseDataset, x, f"{where}.datasets") for x in v)
+        elif k == "runs" and cls is EarlyStop:
+            if not isinstance(v, list):
+                raise ConfigError(f"plan [{where}] runs must be an array of tables ([[early_stop.runs]])")
+            v = tuple(_build(EarlyStopRun, x, f"{where}.runs") for x in v)
         elif isinstance(v, list):
             v = tuple(v)
         out[k] = v
@@ -509,12 +548,27 @@ def validate(plan: Plan) -> None:
     if plan.early_stop is not None:
         es = plan.early_stop
         _shift(es.shift, "early_stop.shift")
+        for s in es.shifts:
+            _shift(s, "early_stop.shifts")
+        if es.seeds:
+            _seeds(es.seeds, "early_stop.seeds")
         for k in ("episodes", "steps", "every", "eval_episodes", "patience"):
             _positive(getattr(es, k), f"early_stop.{k}")
-        if es.episodes > c.episodes:
-            raise ConfigError(
-                f"plan early_stop.episodes = {es.episodes} is above the collection size collect.episodes = {c.episodes}"
-            )
+        names = {d.name for d in plan.base_data.datasets}
+        for r in es.runs:
+            _shift(r.shift, "early_stop.runs.shift")
+            _positive(r.episodes, "early_stop.runs.episodes")
+            missing = sorted(set(r.base) - names)
+            if missing:
+                raise ConfigError(
+                    f"plan early_stop.runs.base names {missing}, which [[base_data.datasets]] does not list; "
+                    f"use some of {sorted(names)} (or none: all of them)"
+                )
+        for n in (es.episodes, *(r.episodes for r in es.runs)):
+            if n > c.episodes:
+                raise ConfigError(
+                    f"plan early_stop episodes = {n} is above the collection size collect.episodes = {c.episodes}"
+                )
         for crit in es.criteria:
             if crit not in CRITERIA:
                 raise unknown("stopping criterion", crit, CRITERIA, "(plan early_stop.criteria)")

@@ -29,7 +29,7 @@ scheduler runs it in topological order.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import networkx as nx
@@ -83,6 +83,34 @@ def train_tag(
     """A training run's tag; ``collection``: the collection seed of a target collection other than the plan's."""
     more = "" if collection is None else f"-c{collection}"
     return f"{prefix or method}-{slug(shift)}-n{episodes}-k{steps}-s{seed}{more}"
+
+
+@dataclass(frozen=True)
+class EarlyStopUnit:
+    """One long fine-tune of [early_stop]: its train tag, shift, tier, seed and base datasets (empty: all)."""
+
+    tag: str
+    shift: str
+    episodes: int
+    seed: int
+    base: tuple[str, ...] = ()
+
+
+def early_stop_runs(plan: Plan) -> list[EarlyStopUnit]:
+    """Every long fine-tune of the plan's [early_stop], in order: its shifts at its tier, then its extra runs, each
+    with every seed (the first is the one the report's early-stopping table reads)."""
+    es = plan.early_stop
+    if es is None:
+        return []
+    out = []
+    wanted = [(s, es.episodes, ()) for s in es.all_shifts] + [(r.shift, r.episodes, tuple(r.base)) for r in es.runs]
+    for shift, episodes, base in wanted:
+        for seed in es.all_seeds:
+            tag = train_tag("ft", shift, episodes, es.steps, seed, prefix="es")
+            if base:
+                tag += "-b-" + "-".join(slug(b) for b in base)
+            out.append(EarlyStopUnit(tag, shift, episodes, seed, base))
+    return out
 
 
 def top_tier_tags(plan: Plan, shift: str) -> dict[int, list[str]]:
@@ -203,10 +231,12 @@ class _Builder:
         mixed: bool = True,
         more: Sequence[tuple[str, int]] = (),
         share: float = 0.5,
+        base: Sequence[str] = (),
     ) -> str:
         """A training run on the first K episodes of ``data`` (None: base data alone), mixed with base data if
         ``mixed``: the target data at ``share`` of each batch; ``more`` target data (online rounds) share it with
-        ``data`` in proportion to their episodes."""
+        ``data`` in proportion to their episodes; ``base`` names the base datasets of its base half (empty: all,
+        each at its weight; named ones share the half in proportion to their weights)."""
         deps = [*self.base_deps]
         target, extra = None, []
         if data is not None:
@@ -228,7 +258,12 @@ class _Builder:
         elif init is not None and init != BASE_POLICY:
             deps.append(f"train:{init}")
         base_share = 1.0 if target is None else 1.0 - share
-        mix = base_mix(self.base, base_share) if (mixed or target is None) and base_share > 0 else []
+        sources = self.base
+        if base:
+            chosen = [b for b in self.base if b.dataset in base]
+            total = sum(b.weight for b in chosen)
+            sources = [replace(b, weight=b.weight / total) for b in chosen]
+        mix = base_mix(sources, base_share) if (mixed or target is None) and base_share > 0 else []
         return self._add(
             Unit(
                 f"train:{tag}",
@@ -329,7 +364,7 @@ class _Builder:
         extra = [
             *(p.continual.sequence if p.continual else ()),
             *([p.curves.shift] if p.curves else ()),
-            *([p.early_stop.shift] if p.early_stop else ()),
+            *(r.shift for r in early_stop_runs(p)),
             *([p.online.shift] if p.online else ()),
         ]
         for s in [*challenge, *[s for s in extra if s not in challenge]]:
@@ -417,23 +452,27 @@ class _Builder:
                     )
         if p.early_stop is not None:
             es = p.early_stop
-            tag = train_tag("ft", es.shift, es.episodes, es.steps, es.seed, prefix="es")
-            self.train(
-                tag,
-                es.shift,
-                self.target_data(es.shift, es.episodes),
-                method="ft",
-                init=BASE_POLICY,
-                steps=es.steps,
-                seed=es.seed,
-                monitor={  # its criteria choose a step: selection scenes
-                    "every": es.every,
-                    "episodes": es.eval_episodes,
-                    "base_episodes": es.eval_episodes,
-                    "seed": p.eval.selection_seed,
-                    "holdout": es.holdout,
-                },
-            )
+            monitor = {  # its criteria choose a step: selection scenes
+                "every": es.every,
+                "episodes": es.eval_episodes,
+                "base_episodes": es.eval_episodes,
+                "seed": p.eval.selection_seed,
+                "holdout": es.holdout,
+                # FQE is fitted at every point only when a criterion needs it (the others come with every curve)
+                **({"criterion": "fqe"} if "fqe" in es.criteria else {}),
+            }
+            for run in early_stop_runs(p):
+                self.train(
+                    run.tag,
+                    run.shift,
+                    self.target_data(run.shift, run.episodes),
+                    method="ft",
+                    init=BASE_POLICY,
+                    steps=es.steps,
+                    seed=run.seed,
+                    monitor=monitor,
+                    base=run.base,
+                )
         return self.units
 
     def _continual(self) -> None:

@@ -145,9 +145,10 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
         parts += _figure(figures, "curves", "method curves")
     if plan.get("early_stop"):
         es = plan["early_stop"]
+        first = (es.get("shifts") or [es["shift"]])[0]  # the first run's shift: the table's
         parts += _blocks(
             "## Overfitting and early stopping (Fig. 5.7)",
-            f"{pretty(es['shift'])}, {es['episodes']} target episodes ({int(es['holdout'] * 100)}% held out "
+            f"{pretty(first)}, {es['episodes']} target episodes ({int(es['holdout'] * 100)}% held out "
             f"for the offline criteria), {es['steps']} steps, evaluated every {es['every']} steps on "
             f"{es['eval_episodes']} scenes; each criterion replayed with patience {es['patience']}. The 'eval' "
             "criterion and the oracle see the same scenes. A criterion with no values on the curve made no "

@@ -14,6 +14,7 @@ from ..units import (
     BASE_POLICY,
     FEATURES_POLICY,
     continual_tags,
+    early_stop_runs,
     no_target_tag,
     online_runs,
     online_tag,
@@ -44,7 +45,7 @@ def gather(plan: Plan, study: str, evaluation, read_curve_file, checkpoint=None)
     extra = [
         *(plan.continual.sequence if plan.continual else ()),
         *([plan.curves.shift] if plan.curves else ()),
-        *([plan.early_stop.shift] if plan.early_stop else ()),
+        *(r.shift for r in early_stop_runs(plan)),
     ]
     if plan.online is not None:
         extra.append(plan.online.shift)
@@ -131,11 +132,11 @@ def gather(plan: Plan, study: str, evaluation, read_curve_file, checkpoint=None)
                 for s in cv.seeds
             }
         out["curves"] = curves
-    if plan.early_stop is not None:
-        es = plan.early_stop
-        out["early_stop"] = _rows(
-            read_curve_file(f"{study}-{train_tag('ft', es.shift, es.episodes, es.steps, es.seed, prefix='es')}")
-        )
+    runs = early_stop_runs(plan)
+    if runs:
+        out["early_stop"] = _rows(read_curve_file(f"{study}-{runs[0].tag}"))  # the first run: the report's table
+        if len(runs) > 1:  # every run's curve (scripts/experiments/early_stopping.py reads them)
+            out["early_stop_runs"] = {r.tag: _rows(read_curve_file(f"{study}-{r.tag}")) for r in runs}
     return out
 
 

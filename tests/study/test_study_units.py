@@ -329,3 +329,46 @@ def test_a_plan_of_the_engine_alone_tests_no_finding_of_the_source():
 
     (line,) = _findings({"plan": {"shifts": ["engine:pybullet"]}})
     assert line.startswith("None of this plan's shifts is one of the source's challenges")
+
+
+def test_early_stopping_runs_every_shift_seed_and_extra_run_with_its_own_base_half():
+    """[early_stop] with shifts, seeds and [[early_stop.runs]]: one long fine-tune each, evaluated on its shift and
+    the base task; a run that names base datasets mixes only those into its base half; the single-run form keeps
+    its unit."""
+    import pytest
+
+    from nsl.errors import ConfigError
+    from nsl.study.units import early_stop_runs
+
+    _, single = _units()
+    assert [n for n in single if n.startswith("train:es-")] == ["train:es-offset-gripper-n8-k10-s0"]
+    extra = """
+shifts = ["offset_gripper", "harsh_lighting"]
+seeds = [0, 1]
+
+[[early_stop.runs]]
+shift = "offset_gripper"
+episodes = 4
+base = ["mini-base-oracle"]
+"""
+    text = MINI_PLAN.replace("holdout = 0.25\n", "holdout = 0.25\n" + extra).replace('"auc", "td"]', '"qmean", "fqe"]')
+    plan, units = _units(text)
+    runs = early_stop_runs(plan)
+    assert [r.tag for r in runs] == [
+        "es-offset-gripper-n8-k10-s0",
+        "es-offset-gripper-n8-k10-s1",
+        "es-harsh-lighting-n8-k10-s0",
+        "es-harsh-lighting-n8-k10-s1",
+        "es-offset-gripper-n4-k10-s0-b-mini-base-oracle",
+        "es-offset-gripper-n4-k10-s1-b-mini-base-oracle",
+    ]
+    for r in runs:
+        u = units[f"train:{r.tag}"]
+        assert (u.params["shift"], u.params["target"]["tier"], u.params["seed"]) == (r.shift, r.episodes, r.seed)
+        assert u.params["monitor"]["criterion"] == "fqe" and u.params["monitor"]["holdout"] == 0.25
+        assert sum(b["weight"] for b in u.params["base"]) == pytest.approx(0.5)
+    assert {"eval:base:offset_gripper", "eval:base:harsh_lighting"} <= set(units)
+    with pytest.raises(ConfigError, match=r"early_stop.runs.base names \['grasp-base-oracle'\]"):
+        _units(text.replace('base = ["mini-base-oracle"]', 'base = ["grasp-base-oracle"]'))
+    with pytest.raises(ConfigError, match="above the collection size"):
+        _units(text.replace("episodes = 4\nbase", "episodes = 400\nbase"))
