@@ -28,6 +28,7 @@ from __future__ import annotations
 import functools
 import json
 import os
+import re
 import sqlite3
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -563,8 +564,10 @@ class Catalog:
         """Record ``successes`` out of ``episodes`` for a checkpoint on ``shift`` (a shift spec name).
 
         ``ci`` is the 95% interval (default: Wilson); ``extra`` any JSON
-        detail (eval config, env version, code version); ``precision`` the
-        arithmetic the policy acted in.  Re-recording the same (checkpoint,
+        detail (eval config, env version, code version); ``precision`` how
+        the policy acted: ``fp32`` or ``bf16`` on the CPU, one state at a time,
+        or ``PRECISION/cuda/N`` on a GPU, N states searched together (its
+        episodes depend on N).  Re-recording the same (checkpoint,
         shift, split, seed, episodes, precision) with the same result is a
         no-op; with a different result it is refused.
         """
@@ -578,8 +581,11 @@ class Catalog:
         lo, hi = ci if ci is not None else wilson_interval(successes, episodes)
         if not 0.0 <= lo <= hi <= 1.0:
             raise ConfigError(f"evaluation interval {ci!r} must satisfy 0 <= low <= high <= 1")
-        if precision not in ("fp32", "bf16"):
-            raise ConfigError(f"evaluation precision {precision!r} must be fp32 or bf16 (the precision that acted)")
+        if not re.fullmatch(r"(fp32|bf16)(/cuda/[1-9][0-9]*)?", str(precision)):
+            raise ConfigError(
+                f"evaluation precision {precision!r} must be fp32 or bf16 (how the policy acted on the CPU), or "
+                "fp32/cuda/N or bf16/cuda/N (on a GPU, N states a call)"
+            )
         key = (entry.id, shift, split, int(seed), episodes, precision)
         with self.write() as c:
             old = c.execute(

@@ -23,7 +23,7 @@ class EvaluationResult:
     table: dict  # {ref: {shift: SuccessRate}}
     paired: dict  # {shift: PairedComparison}, with exactly two refs
     stored: dict  # {ref: catalog id} of the checkpoints whose evaluations were stored
-    precision: str = "fp32"  # what checkpoint policies acted in (fp32 or bf16)
+    precision: str = "fp32"  # how checkpoint policies acted: fp32 or bf16 (CPU), PRECISION/cuda/N (a GPU, N a call)
     source: str | None = None  # recorded with each catalogued evaluation (e.g. "study")
 
     def __getitem__(self, key: str) -> Any:  # result["table"], as the dict it replaces
@@ -75,10 +75,16 @@ def evaluate(
     shifts = parse_shift_list(shift, severity, o.engine)
     config = EvalConfig(episodes=episodes, split=split, seed=seed, workers=workers, batch=num_envs)
 
+    from nsl.learners.device import resolve_device
     from nsl.learners.precision import resolve_precision
 
-    precision = resolve_precision(o.precision)
-    factories = {ref: policy_factory(ref, EnvConfig(), precision=precision) for ref in refs}  # validate all first
+    device = resolve_device(o.device)
+    precision = resolve_precision(o.precision, device)
+    factories = {  # validate all first
+        ref: policy_factory(ref, EnvConfig(), precision=precision, device=device) for ref in refs
+    }
+    if device != "cpu":  # batched acting: the episodes depend on the batch, so the record names it
+        precision = f"{precision}/{device}/{num_envs}"
     from nsl.cluster import open_executor
 
     with open_executor(cluster) as ex:  # local processes, or scene chunks as Ray tasks (same outcomes)

@@ -137,6 +137,13 @@ class EvaluateOptions:
         "result's name off MuJoCo",
         choices=ENGINES,
     )
+    device: str = option(
+        "cpu",
+        "where checkpoint policies act: cpu (one state at a time: an episode does not depend on its batch), or cuda "
+        "(the --num-envs states of a worker searched in one call on the GPU; results recorded as PRECISION/cuda/N, "
+        "apart from the CPU's) or auto",
+        choices=DEVICES,
+    )
 
 
 # --- train ----------------------------------------------------------------------------------------------------------

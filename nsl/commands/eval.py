@@ -32,7 +32,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="REF[,REF]",
         help="comma-separated policies: random | oracle[:NOISE] | ckpt:NAME (default: oracle)",
     )
-    for name in ("shift", "severity", "episodes", "workers", "num_envs", "split", "seed", "precision", "engine"):
+    for name in (
+        "shift",
+        "severity",
+        "episodes",
+        "workers",
+        "num_envs",
+        "split",
+        "seed",
+        "precision",
+        "engine",
+        "device",
+    ):
         add_field(p, EvaluateOptions, name, **({"type": float} if name == "severity" else {}))
     out = p.add_mutually_exclusive_group()
     add_json(out, 'the results ({"results": {SHIFT: {...}}}, or per policy under "policies")')

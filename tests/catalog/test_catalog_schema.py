@@ -10,7 +10,7 @@ from catalog_factories import make_dataset
 from nsl import workspace
 from nsl.catalog import MIGRATIONS, SCHEMA_VERSION, Catalog
 from nsl.catalog.schema import APPLICATION_ID, connect
-from nsl.errors import CorruptDataError, IncompatibleVersionError
+from nsl.errors import ConfigError, CorruptDataError, IncompatibleVersionError
 
 
 def test_new_catalog_is_wal_with_schema_version():
@@ -120,3 +120,9 @@ def test_a_version_3_catalog_keeps_its_evaluations_and_then_holds_both_precision
         assert bf16.precision == "bf16" and len(cat.evaluations(ckpt.id)) == 2
         with pytest.raises(Exception, match="fp32\\) is already recorded with 80 successes"):
             cat.add_evaluation(ckpt.id, "base", episodes=100, successes=79, seed=3000)
+        # a GPU's batched acting is a record of its own, named by the states searched together
+        gpu = cat.add_evaluation(ckpt.id, "base", episodes=100, successes=81, seed=3000, precision="fp32/cuda/8")
+        assert gpu.precision == "fp32/cuda/8" and len(cat.evaluations(ckpt.id)) == 3
+        for bad in ("fp16", "fp32/cuda", "fp32/cuda/0", "fp32/tpu/8"):
+            with pytest.raises(ConfigError, match="must be fp32 or bf16"):
+                cat.add_evaluation(ckpt.id, "base", episodes=100, successes=1, seed=3000, precision=bad)

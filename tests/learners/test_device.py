@@ -247,6 +247,7 @@ def test_cuda_graphed_steps_replay_the_eager_body():
     [
         ["train", "--data", "grasp-base", "--name", "on-gpu", "--steps", "10", "--device", "cuda"],
         ["collect", "--shift", "base", "--episodes", "1", "--policy", "base", "--data", "d", "--device", "cuda"],
+        ["eval", "--checkpoint", "ckpt:base", "--episodes", "1", "--device", "cuda"],
         ["bench", "learner", "--device", "cuda"],
         ["bench", "eval", "--device", "cuda"],
     ],
