@@ -89,6 +89,7 @@ class Unit:
     args: tuple = ()
     kwargs: dict[str, Any] = field(default_factory=dict)
     num_cpus: float = 1.0  # CPUs the unit holds while it runs (its torch threads)
+    num_gpus: float = 0.0  # GPUs it holds (Ray sets CUDA_VISIBLE_DEVICES; a unit without one sees none)
 
 
 class UnitFailed(NslError):
@@ -210,6 +211,10 @@ class RayExecutor(Executor):
         """CPUs in the cluster now."""
         return max(1, int(self.connect().cluster_resources().get("CPU", 1)))
 
+    def gpus(self) -> float:
+        """GPUs in the cluster now."""
+        return float(self.connect().cluster_resources().get("GPU", 0))
+
     def describe(self) -> dict[str, Any]:
         ray = self.connect()
         nodes = [n for n in ray.nodes() if n.get("Alive")]
@@ -217,9 +222,18 @@ class RayExecutor(Executor):
 
     def submit(self, unit: Unit) -> None:
         ray = self.connect()
+        if unit.num_gpus and self.gpus() < unit.num_gpus:  # it would wait for a node that never comes
+            raise ConfigError(
+                f"unit {unit.key} asks for {unit.num_gpus:g} GPU(s) but the cluster has {self.gpus():g}; add a node "
+                "with a GPU (ray start --num-gpus N) or drop --unit-gpus"
+            )
         task = _remote(ray, _call_unit)
         ref = task.options(
-            num_cpus=unit.num_cpus, max_retries=self.max_retries, retry_exceptions=False, name=f"nsl-unit:{unit.key}"
+            num_cpus=unit.num_cpus,
+            num_gpus=unit.num_gpus,
+            max_retries=self.max_retries,
+            retry_exceptions=False,
+            name=f"nsl-unit:{unit.key}",
         ).remote(
             unit.fn,
             unit.args,

@@ -115,11 +115,13 @@ def run_study(
     unit_cpus: float = 1.0,
     store: str | None = None,
     wait: bool = False,
+    unit_gpus: float = 0.0,
 ) -> dict[str, Any]:
     """Run (or resume) a study; writes its report at the end.  Returns the final status record.
 
     ``cluster`` (``--cluster``; None: ``$NSL_CLUSTER``, else local) runs every unit as a Ray task holding
-    ``unit_cpus`` CPUs instead of ``workers`` local processes; the numbers are the same.  ``store`` (``--store``,
+    ``unit_cpus`` CPUs (training units also ``unit_gpus`` GPUs) instead of ``workers`` local processes; the numbers
+    are the same on the CPU.  ``store`` (``--store``,
     an fsspec URL; None: ``$NSL_STORE``, else a shared ``NSL_HOME``) moves the units' folders through it.
     One process runs a study at a time (its folder's writer lock, from the plan check to the report): while
     another holds it this raises LockedError naming it, or with ``wait`` waits for it, then resumes.
@@ -140,6 +142,7 @@ def run_study(
             progress=progress,
             cluster=cluster,
             unit_cpus=unit_cpus,
+            unit_gpus=unit_gpus,
             store=store,
             bases=(plan.base,),
         )
@@ -162,6 +165,7 @@ def run_planned(
     store: str | None = None,
     bases: tuple[str, ...] = (),
     wait: bool = False,
+    unit_gpus: float = 0.0,
 ) -> dict[str, Any]:
     """Run a planned unit graph in ``folder`` (a study's or a transfer's, ``key`` says which): take the folder's
     writer lock (refuse while another process holds it, or ``wait`` for it), save the plan and the unit list,
@@ -173,17 +177,19 @@ def run_planned(
     from nsl.cluster import open_executor, parse_cluster
     from nsl.share.store import parse_store
 
-    if unit_cpus <= 0:
-        raise ConfigError(f"--unit-cpus {unit_cpus} must be positive")
+    if unit_cpus <= 0 or unit_gpus < 0:
+        raise ConfigError(f"--unit-cpus {unit_cpus} must be positive and --unit-gpus {unit_gpus} not negative")
     spec, store = parse_cluster(cluster), parse_store(store)
     executor = open_executor(spec, store=store)  # without Ray, --cluster ray stops here, before anything is written
     with writer_lock(folder, f"{key} {name!r}", wait=wait):  # reentrant: run_study holds it already
         return _run_locked(
-            folder, key, name, plan, units, graph, executor, spec, store, workers, progress, unit_cpus, bases
+            folder, key, name, plan, units, graph, executor, spec, store, workers, progress, unit_cpus, bases, unit_gpus
         )
 
 
-def _run_locked(folder, key, name, plan, units, graph, executor, spec, store, workers, progress, unit_cpus, bases):
+def _run_locked(
+    folder, key, name, plan, units, graph, executor, spec, store, workers, progress, unit_cpus, bases, unit_gpus=0.0
+):
     """:func:`run_planned` under the folder's writer lock (the status file's pid is for information only)."""
     from functools import partial
 
@@ -205,6 +211,8 @@ def _run_locked(folder, key, name, plan, units, graph, executor, spec, store, wo
         actions.resolve_checkpoint(ref)
     with executor as ex:
         where = {"workers": workers} if spec == "local" else {**ex.describe(), "unit_cpus": unit_cpus}
+        if unit_gpus:
+            where["unit_gpus"] = unit_gpus
         if store:  # no shared NSL_HOME: units pull what they read from the store and push what they make
             where["store"] = store
             execute, prepare = actions.run_staged_unit, partial(actions.stage_unit, store=store)
@@ -224,6 +232,7 @@ def _run_locked(folder, key, name, plan, units, graph, executor, spec, store, wo
             progress=progress,
             executor=None if spec == "local" else ex,
             unit_cpus=unit_cpus,
+            unit_gpus=unit_gpus,
             meta={key: name, "plan": plan.source, **where, "code_version": code_version()},
         )
 

@@ -233,18 +233,23 @@ class _Processes:
 
 
 class _Cluster:
-    """Each unit a Ray task holding ``unit_cpus`` CPUs, as many at once as the cluster has room for."""
+    """Each unit a Ray task holding ``unit_cpus`` CPUs (and a training unit ``unit_gpus`` GPUs), as many at once as
+    the cluster has room for."""
 
-    def __init__(self, executor, execute: Callable, unit_cpus: float, where: Path | None):
+    def __init__(self, executor, execute: Callable, unit_cpus: float, where: Path | None, unit_gpus: float = 0.0):
         from nsl.cluster import Unit as Task
 
         self.ex, self.execute, self.unit_cpus, self.where = executor, execute, unit_cpus, where
+        self.unit_gpus = unit_gpus
         self.Task = Task
         self.capacity = max(1, int(executor.cpus() // unit_cpus))
 
     def start(self, name: str, unit: Unit) -> None:
         where = str(self.where / _file_name(name)) if self.where else None
-        self.ex.submit(self.Task(name, cluster_task, (self.execute, unit, where), num_cpus=self.unit_cpus))
+        gpus = self.unit_gpus if unit.kind == "train" else 0.0  # collections and evaluations act on the CPU
+        self.ex.submit(
+            self.Task(name, cluster_task, (self.execute, unit, where), num_cpus=self.unit_cpus, num_gpus=gpus)
+        )
 
     def next(self) -> tuple[str, BaseException | None, dict | None]:
         from nsl.cluster import UnitFailed as TaskFailed
@@ -280,6 +285,7 @@ def run_graph(
     cost: Callable[[Unit], float] | None = None,
     executor=None,
     unit_cpus: float = 1.0,
+    unit_gpus: float = 0.0,
 ) -> dict[str, Any]:
     """Run every unit not yet done; returns the final status record.  Raises UnitFailed if a unit fails.
 
@@ -287,7 +293,8 @@ def run_graph(
     it starts (e.g. to resolve the checkpoints it reads): worker processes and cluster tasks then never open the
     catalog, and this process is its only user.  ``cost(unit)`` (seconds, estimated) orders the ready
     units by their critical path.  ``executor`` (a Ray :class:`nsl.cluster.RayExecutor`) runs each unit as a Ray
-    task holding ``unit_cpus`` CPUs, instead of ``workers`` local processes.
+    task holding ``unit_cpus`` CPUs, instead of ``workers`` local processes; training units also hold
+    ``unit_gpus`` GPUs there (a plan's ``device = "auto"`` then trains on them).
     """
     from nsl.progress import progress_bar
 
@@ -306,7 +313,7 @@ def run_graph(
     # a unit task notes where it runs beside status.json, which a node without the shared NSL_HOME (--store) cannot
     where = None if getattr(executor, "store", None) else Path(status_path).parent / WHERE_DIR
     if executor is not None:
-        pool: Any = _Cluster(executor, execute, unit_cpus, where)
+        pool: Any = _Cluster(executor, execute, unit_cpus, where, unit_gpus)
     elif workers == 1:
         pool = _InProcess(execute, os.cpu_count() or 1, progress)
     else:

@@ -124,10 +124,11 @@ def run_transfer(
     unit_cpus: float = 1.0,
     store: str | None = None,
     wait: bool = False,
+    unit_gpus: float = 0.0,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Run (or resume) a transfer, then write its matrix and report: (final status record, report summary).
 
-    ``cluster``, ``unit_cpus``, ``store`` and ``wait`` as for :func:`nsl.study.driver.run_study`."""
+    ``cluster``, ``unit_cpus``, ``unit_gpus``, ``store`` and ``wait`` as for :func:`nsl.study.driver.run_study`."""
     if workers < 1:
         raise ConfigError(f"--workers {workers} must be at least 1")
     plan, units, graph = prepare_transfer(plan_ref, name)  # checks everything, writes nothing
@@ -144,6 +145,7 @@ def run_transfer(
             progress=progress,
             cluster=cluster,
             unit_cpus=unit_cpus,
+            unit_gpus=unit_gpus,
             store=store,
         )
         return status, write_transfer_report(plan.name)

@@ -21,6 +21,13 @@ def add_unit_cpus(p) -> None:
         help="with --cluster: CPUs each unit holds (its torch threads and simulators); default 1",
     )
     p.add_argument(
+        "--unit-gpus",
+        type=float,
+        default=0.0,
+        help="with --cluster: GPUs each training unit holds (its plan's device auto then trains there; collections "
+        "and evaluations stay on the CPUs); default 0",
+    )
+    p.add_argument(
         "--store",
         default=None,
         metavar="URL",
@@ -37,6 +44,7 @@ def run_options(args: argparse.Namespace) -> dict:
         "progress": not args.quiet,
         "cluster": args.cluster,
         "unit_cpus": args.unit_cpus,
+        "unit_gpus": args.unit_gpus,
         "store": args.store,
         "wait": args.wait,
     }

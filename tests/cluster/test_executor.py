@@ -81,6 +81,15 @@ def _node_and_home(tag: str) -> tuple[str, str]:
     return ray.get_runtime_context().get_node_id(), str(path)
 
 
+def _visible_gpus() -> tuple[str, str | None]:
+    """Which node ran this, and the GPUs Ray let it see."""
+    import os
+
+    import ray
+
+    return ray.get_runtime_context().get_node_id(), os.environ.get("CUDA_VISIBLE_DEVICES")
+
+
 def _fail() -> None:
     raise ConfigError("--steps 0 must be at least 1")
 
@@ -139,6 +148,24 @@ def test_units_run_as_ray_tasks_on_both_nodes_and_need_the_shared_workspace(ray_
             r"same nsl on every node",
         ):
             ex.wait()
+
+
+def test_a_unit_that_holds_a_gpu_runs_on_the_node_that_has_one_and_is_refused_where_none_is(ray_cluster):
+    """``--unit-gpus``: Ray counts GPUs as it counts CPUs (a node declares them; none is needed to test the
+    scheduling), and sets CUDA_VISIBLE_DEVICES for the unit that holds one."""
+    from tests.cluster.conftest import NODE_MEMORY
+
+    cluster, _ = ray_cluster
+    with open_executor("ray") as ex:
+        with pytest.raises(ConfigError, match=r"^unit gpu asks for 1 GPU\(s\) but the cluster has 0; add a node"):
+            ex.submit(Unit("gpu", _visible_gpus, num_gpus=1))
+        assert ex.outstanding == 0
+    gpu_node = cluster.add_node(num_cpus=1, num_gpus=1, object_store_memory=NODE_MEMORY)
+    cluster.wait_for_nodes()
+    with open_executor("ray") as ex:
+        assert ex.gpus() == 1
+        out = dict(ex.run_units([Unit("gpu", _visible_gpus, num_gpus=1)]))
+    assert out["gpu"] == (gpu_node.node_id, "0")
 
 
 def test_the_five_folders_take_a_runner_and_never_import_the_cluster_package():

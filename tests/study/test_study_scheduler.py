@@ -171,3 +171,28 @@ def catalog_free_unit(unit: Unit, inner_workers: int, progress: bool) -> dict:
         Catalog()
     touch_unit(unit, inner_workers, progress)
     return {"no_catalog": os.environ.get(NO_CATALOG_ENV)}
+
+
+def test_on_a_cluster_training_units_hold_the_unit_gpus_and_the_others_none():
+    from nsl.study.scheduler import _Cluster
+
+    class Recorder:
+        def __init__(self):
+            self.tasks = []
+
+        def cpus(self) -> int:
+            return 4
+
+        def submit(self, task) -> None:
+            self.tasks.append(task)
+
+    ex = Recorder()
+    pool = _Cluster(ex, execute=lambda *a: {}, unit_cpus=2.0, where=None, unit_gpus=1.0)
+    assert pool.capacity == 2
+    for kind in ("train", "eval", "collect"):
+        pool.start(f"{kind}:x", Unit(f"{kind}:x", kind, {}))
+    assert [(t.key, t.num_cpus, t.num_gpus) for t in ex.tasks] == [
+        ("train:x", 2.0, 1.0),
+        ("eval:x", 2.0, 0.0),
+        ("collect:x", 2.0, 0.0),
+    ]
