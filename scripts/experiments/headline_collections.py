@@ -1,7 +1,7 @@
 """The headline study's fine-tunes by target collection and training seed, from its committed records.
 
 Reads ``docs/study-headline/records.json`` (``nsl study report headline`` writes it) and prints, for each
-shift measured so far, the base policy's success and each 800-episode fine-tune's, on the shift and on the
+shift, the base policy's success and each 800-episode fine-tune's, on the shift and on the
 base task, grouped by target collection (seed 5: the plan's collection; 97573: the second), on the 500 final
 reporting scenes (seed 51425).  The intervals are in the report itself (``nsl.stats``' hierarchical bootstrap).
 
