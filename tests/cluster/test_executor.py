@@ -70,12 +70,21 @@ def _square(x: int) -> int:
 
 
 def _node_and_home(tag: str) -> tuple[str, str]:
-    """Which node ran this, and a file written under NSL_HOME (which the driver must then see)."""
+    """Which node ran this, and a file written under NSL_HOME (which the driver must then see).
+
+    The first two units wait for each other (bounded): with one CPU per node, two units running at once are on
+    the two nodes, however slowly a loaded machine starts a node's worker.
+    """
     import time
 
     import ray
 
-    time.sleep(0.5)  # long enough that the two one-CPU nodes each take units
+    started = workspace.home() / "units" / "started"
+    started.mkdir(parents=True, exist_ok=True)
+    (started / tag).touch()
+    deadline = time.monotonic() + 60
+    while len(list(started.iterdir())) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
     path = workspace.home() / "units" / f"{tag}.txt"
     workspace.atomic_write_bytes(path, tag.encode())
     return ray.get_runtime_context().get_node_id(), str(path)
