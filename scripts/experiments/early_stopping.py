@@ -1,0 +1,310 @@
+"""Early stopping without a simulator: each criterion's pick in the `early-stop` study, judged on unseen scenes.
+
+The study (``nsl study run early-stop``) fine-tunes the shipped base for 10,000 steps on every shift and keeps
+a checkpoint every 500 steps, with the simulator on 200 selection scenes and the offline criteria (SoftOPC,
+Q-ranking AUC, TD error, average Q, FQE) on held-out target episodes.  This script judges the picks:
+
+``evaluate STUDY`` (resumable: outcomes append to ``$NSL_HOME/studies/STUDY/judged.jsonl``)
+  * every kept checkpoint of every finished run on the oracle's scenes: 500 test-object scenes of its shift,
+    seed ``nsl.REPORTING_SCENES`` (2000), which no criterion saw; the best there is the oracle's pick;
+  * each criterion's pick, the baselines' (the recipe's fixed 2,000 steps, the last step) and the oracle's on
+    the final reporting scenes (seed 51425, 500 scenes), on the shift and on the base task.
+  It costs 21 x 500 + about 6 x 1,000 episodes per run: about 12 minutes per run on this 2-core machine.
+
+``export STUDY --out DIR``: copies the curves and the judged outcomes into DIR (the committed records).
+
+``report DIR``: from the committed records alone, prints the criteria table (criterion x shift: chosen steps,
+reporting success, regret against the oracle with its hierarchical interval over seeds and scenes, Spearman's
+rho against the oracle's scenes, the base task at the pick) and draws the Fig. 5.7 curves to DIR/curves.png.
+
+    python scripts/experiments/early_stopping.py evaluate early-stop --workers 2
+    python scripts/experiments/early_stopping.py export early-stop --out docs/experiments/early-stopping
+    python scripts/experiments/early_stopping.py report docs/experiments/early-stopping
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import shutil
+from pathlib import Path
+
+ORACLE_EPISODES = 500
+REPORTING_EPISODES = 500
+JUDGED = "judged.jsonl"
+
+
+# --- the records --------------------------------------------------------------------------------------------------
+
+
+def judged_tag(tag: str, step: int) -> str:
+    """Step 0 is the base policy itself, the same for every run: judged once, under ``base``."""
+    return "base" if step == 0 else tag
+
+
+def read_judged(path: Path) -> dict[tuple, list[bool]]:
+    """{(tag, step, task, seed, episodes): outcomes}; a line cut short by a crash is ignored."""
+    out = {}
+    if path.is_file():
+        for line in path.read_text().splitlines():
+            try:
+                d = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            out[(d["tag"], d["step"], d["task"], d["seed"], d["episodes"])] = [c == "1" for c in d["outcomes"]]
+    return out
+
+
+def append_judged(path: Path, key: tuple, outcomes: list[bool]) -> None:
+    tag, step, task, seed, episodes = key
+    line = {"tag": tag, "step": step, "task": task, "seed": seed, "episodes": episodes}
+    line["outcomes"] = "".join("1" if o else "0" for o in outcomes)
+    with open(path, "a") as f:
+        f.write(json.dumps(line) + "\n")
+        f.flush()
+
+
+def plan_of(study: str):
+    from study.driver import _load
+
+    return _load(study)
+
+
+def runs_of(plan) -> list:
+    from study.units import early_stop_runs
+
+    return early_stop_runs(plan)
+
+
+def judged_runs(records: Path, meta: dict, judged: dict) -> list:
+    """The runs whose curve ended and whose oracle scenes are all evaluated, as JudgedRun."""
+    from nsl.eval.records import read_curve
+    from nsl.eval.selection import JudgedRun
+
+    out = []
+    for r in meta["runs"]:
+        path = records / "curves" / f"{r['tag']}.csv"
+        if not path.is_file():
+            continue
+        rows = read_curve(path)
+        if not rows or rows[-1].step != meta["steps"]:
+            continue
+        oracle = {
+            s.step: judged.get((judged_tag(r["tag"], s.step), s.step, "target", meta["oracle_seed"], ORACLE_EPISODES))
+            for s in rows
+        }
+        if any(v is None for v in oracle.values()):
+            continue
+        reporting = {}
+        for (tag, step, task, seed, n), o in judged.items():
+            if tag == judged_tag(r["tag"], step) and seed == meta["reporting_seed"] and n == REPORTING_EPISODES:
+                reporting[(step, task)] = o
+        out.append(JudgedRun(r["tag"], r["label"], r["seed"], rows, oracle, reporting))
+    return out
+
+
+def meta_of(plan) -> dict:
+    from nsl import FINAL_REPORTING_SCENES, REPORTING_SCENES
+
+    es = plan.early_stop
+    runs = []
+    for r in runs_of(plan):
+        label = r.shift if r.episodes == es.episodes and not r.base else f"{r.shift} n{r.episodes}"
+        if r.base:
+            label += " base " + "+".join(r.base)
+        runs.append({"tag": r.tag, "shift": r.shift, "label": label, "seed": r.seed, "episodes": r.episodes})
+    return {
+        "study": plan.name,
+        "steps": es.steps,
+        "every": es.every,
+        "patience": es.patience,
+        "fixed_step": plan.finetune.steps,
+        "oracle_seed": REPORTING_SCENES,
+        "reporting_seed": FINAL_REPORTING_SCENES,
+        "runs": runs,
+    }
+
+
+# --- evaluate -----------------------------------------------------------------------------------------------------
+
+
+def evaluate(study: str, workers: int) -> None:
+    from nsl import workspace
+    from nsl.collectors import parse_shift_list
+    from nsl.eval import EvalConfig, evaluate_outcomes
+    from nsl.eval.records import read_curve
+    from nsl.eval.selection import needed_reporting
+    from nsl.learners import load_policy
+
+    plan = plan_of(study)
+    meta = meta_of(plan)
+    folder = workspace.home() / "studies" / study
+    path = folder / JUDGED
+    judged = read_judged(path)
+
+    def score(run: str, step: int, task: str, seed: int, episodes: int) -> None:
+        tag = judged_tag(run, step)
+        key = (tag, step, task, seed, episodes)
+        if key in judged:
+            return
+        ckpt = workspace.home() / "runs" / f"{study}-{run}" / "checkpoints" / f"step-{step:09d}"
+        if step == 0:
+            from nsl.catalog import Catalog
+            from nsl.services.refs import resolve_init
+
+            with Catalog() as cat:
+                ckpt = resolve_init(cat, plan.base).path
+        (spec,) = parse_shift_list(task if task != "target" else shift_of[run])
+        config = EvalConfig(episodes=episodes, seed=seed, workers=workers, batch=8)
+        got = evaluate_outcomes(functools.partial(load_policy, str(ckpt)), [spec], config, progress=False)
+        outcomes = next(iter(got.values()))
+        append_judged(path, key, outcomes)
+        judged[key] = outcomes
+        print(f"{tag} step {step} {task} seed {seed}: {100 * sum(outcomes) / len(outcomes):.1f}%", flush=True)
+
+    shift_of = {r["tag"]: r["shift"] for r in meta["runs"]}
+    records = folder / "judging"
+    (records / "curves").mkdir(parents=True, exist_ok=True)
+    for r in meta["runs"]:
+        curve = workspace.home() / "runs" / f"{study}-{r['tag']}" / "curve.csv"
+        if not curve.is_file():
+            continue
+        rows = read_curve(curve)
+        if not rows or rows[-1].step != meta["steps"]:
+            print(f"{r['tag']}: still training (step {rows[-1].step if rows else 0}); skipped", flush=True)
+            continue
+        shutil.copyfile(curve, records / "curves" / f"{r['tag']}.csv")
+        for row in rows:
+            score(r["tag"], row.step, "target", meta["oracle_seed"], ORACLE_EPISODES)
+    runs = judged_runs(records, meta, judged)
+    for tag, steps in needed_reporting(runs, meta["patience"], meta["fixed_step"]).items():
+        for step in sorted(steps):
+            for task in ("target", "base"):
+                score(tag, step, task, meta["reporting_seed"], REPORTING_EPISODES)
+    (records / "meta.json").write_text(json.dumps(meta, indent=1) + "\n")
+    shutil.copyfile(path, records / JUDGED)
+    print(f"{len(runs)} of {len(meta['runs'])} runs judged; records in {records}")
+
+
+def export(study: str, out: Path) -> None:
+    from nsl import workspace
+
+    src = workspace.home() / "studies" / study / "judging"
+    if not (src / "meta.json").is_file():
+        raise SystemExit(f"no judged records in {src}; run `evaluate {study}` first")
+    shutil.copytree(src, out, dirs_exist_ok=True)
+    print(f"copied {src} to {out}")
+
+
+# --- report -------------------------------------------------------------------------------------------------------
+
+
+def report(records: Path) -> None:
+    from nsl.eval.selection import ORACLE, WHOLE_CURVE, score_criteria
+
+    meta = json.loads((records / "meta.json").read_text())
+    judged = read_judged(records / JUDGED)
+    runs = judged_runs(records, meta, judged)
+    labels = list(dict.fromkeys(r["label"] for r in meta["runs"]))
+    print(f"{len(runs)} of {len(meta['runs'])} runs judged")
+    plot(records, meta, labels)
+    plain = {x["shift"] for x in meta["runs"]}
+    main = [r for r in runs if r.shift in plain]  # the five shifts at the plan's tier (label = shift)
+    extra = [r for r in runs if r.shift not in plain]
+    for title, judged_group in (("the five shifts at the plan's tier", main), ("the extra runs", extra)):
+        by_label: dict[str, list] = {}
+        for r in sorted(judged_group, key=lambda r: r.seed):
+            by_label.setdefault(r.shift, []).append(r)
+        if not by_label:
+            continue
+        n = min(len(v) for v in by_label.values())  # as many seeds on every shift
+        group = [r for v in by_label.values() for r in v[:n]]
+        print(f"\n### {title} ({n} seeds each)\n")
+        print(
+            "| criterion | shift | chosen steps | success at the pick | regret vs the oracle [95%] | "
+            "Spearman's rho | base task at the pick |"
+        )
+        print("|---|---|---|---|---|---|---|")
+        scores = score_criteria(group, meta["patience"], meta["fixed_step"])
+        order = [ORACLE, "eval", WHOLE_CURVE, "softopc", "auc", "td", "qmean", "fqe", "fixed", "final"]
+        for name in order:
+            for s in scores:
+                if s.criterion != name:
+                    continue
+                rho = "-" if s.rho is None else f"{s.rho:+.2f}"
+                print(
+                    f"| {name} | {s.shift or '**mean**'} | {' '.join(map(str, s.steps)) if s.shift else ''} | "
+                    f"{100 * s.target.mean:.1f}% | {s.regret.points()} | {rho} | {100 * s.base.mean:.1f}% |"
+                )
+
+
+def plot(records: Path, meta: dict, labels: list[str]) -> None:
+    """Fig. 5.7: success on the shift and on the base task (selection scenes) against steps, a panel per run
+    group, each seed a thin line and their mean a thick one."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from nsl.eval.records import read_curve
+
+    cols = min(4, len(labels))
+    rows_n = (len(labels) + cols - 1) // cols
+    fig, axes = plt.subplots(rows_n, cols, figsize=(4 * cols, 3.2 * rows_n), sharey=True, squeeze=False)
+    for ax, label in zip(axes.flat, labels):
+        for task, colour in (("target", "tab:blue"), ("base", "tab:grey")):
+            curves = []
+            for r in meta["runs"]:
+                path = records / "curves" / f"{r['tag']}.csv"
+                if r["label"] != label or not path.is_file():
+                    continue
+                rows = read_curve(path)
+                xs = [x.step for x in rows]
+                ys = [100 * (x.target if task == "target" else x.base).success_rate for x in rows]
+                ax.plot(xs, ys, color=colour, alpha=0.3, lw=0.8)
+                curves.append(dict(zip(xs, ys)))
+            if curves:
+                common = sorted(set.intersection(*(set(c) for c in curves)))
+                ax.plot(
+                    common,
+                    [sum(c[s] for c in curves) / len(curves) for s in common],
+                    color=colour,
+                    lw=2,
+                    label="shift" if task == "target" else "base task",
+                )
+        ax.axvline(meta["fixed_step"], color="k", ls=":", lw=0.8)
+        ax.set_title(label, fontsize=9)
+        ax.set_xlabel("gradient steps")
+        ax.grid(alpha=0.3)
+    for ax in axes.flat[len(labels) :]:
+        ax.axis("off")
+    axes[0][0].set_ylabel("success on 200 selection scenes (%)")
+    axes[0][0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(records / "curves.png", dpi=110)
+    print(f"wrote {records / 'curves.png'}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    e = sub.add_parser("evaluate", help="evaluate the finished runs' checkpoints and picks (resumable)")
+    e.add_argument("study")
+    e.add_argument("--workers", type=int, default=2)
+    x = sub.add_parser("export", help="copy the judged records out of the workspace")
+    x.add_argument("study")
+    x.add_argument("--out", type=Path, required=True)
+    r = sub.add_parser("report", help="the criteria table and the curves, from the records")
+    r.add_argument("records", type=Path)
+    a = ap.parse_args()
+    if a.cmd == "evaluate":
+        evaluate(a.study, a.workers)
+    elif a.cmd == "export":
+        export(a.study, a.out)
+    else:
+        report(a.records)
+
+
+if __name__ == "__main__":
+    main()
