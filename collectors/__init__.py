@@ -11,7 +11,8 @@ reach into the modules)::
     Policy, scripted_policy, register_policy    # random, oracle[:NOISE], plugins' PACKAGE.NAME[:ARGS]
     Episode, episode_seeds, run_episodes, make_envs, collect_episodes
     render_gallery                              # `nsl render`
-    object_frames, object_classes               # labelled frames of the train objects (supervised features)
+    object_frames, object_classes, ObjectFrames # labelled frames of the train objects (supervised features)
+    POSE_LABELS                                 # and their poses relative to the camera
     GYM_ID                                      # gymnasium.make(GYM_ID, shift="harsh_lighting")
 
 The names are loaded on first use (a module-level ``__getattr__``), so
@@ -37,7 +38,7 @@ GYM_ID = "nsl/Grasp-v3"  # the version matches ENV_VERSION ("nsl-grasp-v3"; test
 _EXPORTS = {
     "env": ("ACTION_DIM", "CONTROL_MODES", "ENV_VERSION", "STATE_DIM", "EnvConfig", "GraspEnv"),
     "gallery": ("render_gallery",),
-    "labelled_frames": ("object_classes", "object_frames"),
+    "labelled_frames": ("POSE_LABELS", "ObjectFrames", "object_classes", "object_frames"),
     "parallel": ("collect_episodes",),
     "policies": ("Policy", "register_policy", "scripted_policy"),
     "rollout": ("Episode", "episode_seeds", "make_envs", "run_episodes"),

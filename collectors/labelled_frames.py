@@ -6,6 +6,11 @@ folders but one whose mesh is broken).  The object's pose, size and colour are r
 tell the objects apart by their shape.  The test split's objects (the ones every evaluation grasps) never
 appear.
 
+Each frame also carries the object's **pose relative to the camera**, a label the simulator gives for free and
+one a grasping policy needs: the object's centre in the wrist's horizontal frame (``u`` along the gripper's
+yaw, ``v`` across it, metres) and the wrist's height above it (``h``).  A trunk can learn it from any frame,
+where the 899 shapes are hard to tell apart from 24 views each.
+
 ``object_frames(per_class, seed)`` renders the same frames for the same arguments: object ``k``'s size draws
 from ``numpy.random.default_rng([seed, k])`` and its frame ``j`` from ``default_rng([seed, k, j])``.
 """
@@ -13,6 +18,7 @@ from ``numpy.random.default_rng([seed, k])`` and its frame ``j`` from ``default_
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -28,6 +34,15 @@ from .shifts import parse_shift
 from .world import BIN_HALF, FINGER_OPEN, ObjectSpec
 
 CAMERA_HEIGHT = (0.15, 0.30)  # wrist heights the frames are taken from (metres)
+POSE_LABELS = ("u", "v", "h")  # the object's centre in the wrist's yaw frame, and the wrist's height above it
+
+
+class ObjectFrames(NamedTuple):
+    """Rendered frames of the train objects with both their labels."""
+
+    images: np.ndarray  # (N, H, W, 3) uint8
+    labels: np.ndarray  # (N,) int64: the object's index among the train objects
+    poses: np.ndarray  # (N, 3) float32: POSE_LABELS, metres
 
 
 def object_classes(classes: int | None = None) -> tuple[int, ...]:
@@ -42,8 +57,8 @@ def object_classes(classes: int | None = None) -> tuple[int, ...]:
 
 def object_frames(
     per_class: int, seed: int, classes: int | None = None, image_size: int = 64, progress: bool = False
-) -> tuple[np.ndarray, np.ndarray]:
-    """``(images (N, H, W, 3) uint8, labels (N,) int64)``: ``per_class`` frames of each train object, in class order."""
+) -> ObjectFrames:
+    """``per_class`` frames of each train object, in class order, with their classes and poses."""
     if per_class < 1:
         raise ConfigError(f"frames per class {per_class} must be at least 1")
     ids = object_classes(classes)
@@ -52,6 +67,7 @@ def object_frames(
     renderer = SceneRenderer(image_size, image_size)
     images = np.empty((len(ids) * per_class, image_size, image_size, 3), np.uint8)
     labels = np.repeat(np.arange(len(ids), dtype=np.int64), per_class)
+    poses = np.empty((len(ids) * per_class, len(POSE_LABELS)), np.float32)
     spread = BIN_HALF - 0.045
     try:
         for k, mesh_id in enumerate(progress_bar(ids, desc="render objects", unit="object", disable=not progress)):
@@ -75,8 +91,12 @@ def object_frames(
                 dx, dy = r.uniform(-0.03, 0.03, 2)
                 data.qpos[wrist["wrist_x"]] = x + dx
                 data.qpos[wrist["wrist_y"]] = y + dy
-                data.qpos[wrist["wrist_z"]] = r.uniform(*CAMERA_HEIGHT)
-                data.qpos[wrist["wrist_yaw"]] = r.uniform(-math.pi / 2, math.pi / 2)
+                height = r.uniform(*CAMERA_HEIGHT)
+                yaw = r.uniform(-math.pi / 2, math.pi / 2)
+                data.qpos[wrist["wrist_z"]] = height
+                data.qpos[wrist["wrist_yaw"]] = yaw
+                cos, sin = math.cos(yaw), math.sin(yaw)  # the object sits at (-dx, -dy) from the wrist
+                poses[k * per_class + j] = (-cos * dx - sin * dy, sin * dx - cos * dy, height - radius)
                 for finger in ("finger_left", "finger_right"):
                     data.qpos[int(model.joint(finger).qposadr[0])] = FINGER_OPEN
                 mujoco.mj_forward(model, data)
@@ -84,4 +104,4 @@ def object_frames(
             renderer.release(model)
     finally:
         renderer.close()
-    return images, labels
+    return ObjectFrames(images, labels, poses)

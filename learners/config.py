@@ -316,9 +316,12 @@ class TrainConfig:
         return dataclasses.replace(self, **changes)
 
 
+FEATURE_LABELS = ("classes", "pose", "both")  # what the supervised trunk learns to predict (nsl.learners.features)
+
+
 @dataclass(frozen=True)
 class FeatureConfig:
-    """Training the trunk as an image classifier."""
+    """Training the trunk on labelled frames: as a classifier, a pose regressor, or both."""
 
     steps: int = 3000  # gradient steps
     batch_size: int = 128
@@ -327,6 +330,7 @@ class FeatureConfig:
     augment_crop: int = 4  # random-shift augmentation (as in Q-learning)
     holdout: int = 2  # frames per class kept out of training to measure accuracy
     seed: int = 0
+    label: str = "classes"  # classes | pose | both (FEATURE_LABELS)
 
     def __post_init__(self) -> None:
         if self.steps < 1 or self.batch_size < 1 or self.holdout < 0:
@@ -336,6 +340,8 @@ class FeatureConfig:
             )
         if not 0 < self.lr < 1:
             raise ConfigError(f"features: learning rate {self.lr} is out of range; use e.g. 1e-3")
+        if self.label not in FEATURE_LABELS:
+            raise ConfigError(f"features: label {self.label!r} is unknown; use one of {', '.join(FEATURE_LABELS)}")
 
 
 def _known(cls: type, d: dict[str, Any], what: str) -> dict[str, Any]:

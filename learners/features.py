@@ -3,10 +3,11 @@
 The study's ImageNet column (Table 5.2) fine-tunes a network with supervised pre-trained convolutional
 features on the same data as the RL-pre-trained base.  Two sources of such a trunk:
 
-* :func:`train_features`: the Q-network's own trunk trained to tell labelled frames apart (the project's
-  analogue of ImageNet: the 899 train objects rendered by the simulator, ``nsl.collectors.object_frames``):
-  trunk -> global average pool -> :func:`classifier` (batch norm, then linear), cross-entropy, Adam,
-  random-shift augmentation;
+* :func:`train_features`: the Q-network's own trunk trained on labelled frames (the project's analogue of
+  ImageNet: the 899 train objects rendered by the simulator, ``nsl.collectors.object_frames``): trunk ->
+  global average pool -> a batch-norm-then-linear layer, Adam.  ``label="classes"`` classifies the object
+  (cross-entropy, random-shift augmentation); ``"pose"`` regresses the object's position relative to the
+  camera (squared error on standardised targets, no shift: it would move the answer); ``"both"`` sums the two;
 * :func:`encoder_features`: a torchvision ResNet's weights from a file (e.g. real ImageNet weights).
 
 Either becomes a checkpoint of the one format (method ``"supervised"``), its head freshly initialised and
@@ -33,6 +34,8 @@ from .checkpoint import checkpoint_config, save_checkpoint
 from .config import ENCODERS, FeatureConfig, NetConfig, TrainConfig
 from .networks import QNetwork, is_head_parameter, resnet_trunk
 
+POSE_LABELS = ("u", "v", "h")  # nsl.collectors.POSE_LABELS: the learners do not import the collectors
+
 METHOD = "supervised"  # the method a features checkpoint records
 
 
@@ -51,6 +54,29 @@ def classifier(channels: int, classes: int) -> nn.Sequential:
     (``scripts/experiments/features_probe.py``).  Only the trunk is kept; the classifier is discarded.
     """
     return nn.Sequential(nn.BatchNorm1d(channels), nn.Linear(channels, classes))
+
+
+def _pose_error(net: QNetwork, head: nn.Module, images: np.ndarray, poses: np.ndarray, mean: np.ndarray) -> dict:
+    """Held-out pose regression: each label's mean squared error over that of predicting the training mean (1 - R^2
+    against the training mean; below 1 means the trunk learned something), and their average."""
+    if not len(images):
+        return {}
+    preds = []
+    with torch.no_grad():
+        for i in range(0, len(images), 512):
+            x = prepare_images(torch.from_numpy(images[i : i + 512]), 0, 0.0, None)
+            preds.append(head(_features(net, x)).numpy())
+    scale = head.get_buffer("scale").numpy()  # set by _pose_head
+    pred = np.concatenate(preds) * scale + mean
+    ratios = ((pred - poses) ** 2).mean(axis=0) / np.maximum(((poses - mean) ** 2).mean(axis=0), 1e-12)
+    return {"pose_error_ratio": float(ratios.mean()), "pose_error_ratios": [float(r) for r in ratios]}
+
+
+def _pose_head(channels: int, std: np.ndarray) -> nn.Module:
+    """The regressor on the pooled trunk features (batch norm, then linear), predicting standardised poses."""
+    head = classifier(channels, len(std))
+    head.register_buffer("scale", torch.from_numpy(std.astype(np.float32)))
+    return head
 
 
 def _accuracy(net: QNetwork, head: nn.Module, images: np.ndarray, labels: np.ndarray) -> float | None:
@@ -74,46 +100,83 @@ def train_features(
     data: dict[str, Any],
     out: Path,
     per_class: int,
+    poses: np.ndarray | None = None,
     progress: bool = True,
 ) -> dict[str, Any]:
-    """Train ``architecture``'s trunk to classify ``images`` (class-major, ``per_class`` frames each) and save the
-    network at ``out``; returns the accuracies.  ``training`` is recorded as the checkpoint's training config
-    (fine-tunes from it take 25% of its rate and keep its n-step and crop, as from the RL base)."""
+    """Train ``architecture``'s trunk on ``images`` (class-major, ``per_class`` frames each) to predict their
+    ``labels`` and/or ``poses`` (``config.label``) and save the network at ``out``; returns what the held-out
+    frames measured.  ``training`` is recorded as the checkpoint's training config (fine-tunes from it take 25% of
+    its rate and keep its n-step and crop, as from the RL base)."""
     classes = int(labels.max()) + 1
     if len(images) != classes * per_class or per_class <= config.holdout:
         raise ConfigError(
             f"features: {len(images)} frames are not {classes} classes x {per_class}, or per_class is not above "
             f"holdout {config.holdout}"
         )
+    use_classes, use_pose = config.label in ("classes", "both"), config.label in ("pose", "both")
+    if use_pose and (poses is None or len(poses) != len(images)):
+        raise ConfigError(f"features: label {config.label!r} needs a pose for each of the {len(images)} frames")
     held = (np.arange(len(images)) % per_class) >= per_class - config.holdout
     train_x, train_y = images[~held], labels[~held]
     torch.manual_seed(config.seed)
     net = QNetwork(NetConfig.from_dict({**architecture.to_dict(), "columns": 1})).train()
-    head = classifier(net.cfg.feature_channels, classes).train()
-    params = [p for n, p in net.named_parameters() if not is_head_parameter(n)] + list(head.parameters())
+    channels = net.cfg.feature_channels
+    heads: dict[str, nn.Module] = {}
+    if use_classes:
+        heads["classes"] = classifier(channels, classes)
+    if use_pose:
+        assert poses is not None
+        train_p = poses[~held].astype(np.float64)
+        pose_mean, pose_std = train_p.mean(axis=0), np.maximum(train_p.std(axis=0), 1e-6)
+        heads["pose"] = _pose_head(channels, pose_std)
+        targets_t = torch.from_numpy(((train_p - pose_mean) / pose_std).astype(np.float32))
+    params = [p for n, p in net.named_parameters() if not is_head_parameter(n)]
+    params += [p for h in heads.values() for p in h.parameters()]
     opt = torch.optim.Adam(params, lr=config.lr, weight_decay=config.weight_decay)
     gen = torch.Generator().manual_seed(config.seed)
     images_t, labels_t = torch.from_numpy(train_x), torch.from_numpy(train_y)
+    crop = config.augment_crop if not use_pose else 0  # a shifted frame would move the pose it is labelled with
+    for h in heads.values():
+        h.train()
     loss_sum, n = 0.0, 0
     for _ in progress_bar(range(config.steps), desc="train features", unit="step", disable=not progress):
         idx = torch.randint(0, len(images_t), (config.batch_size,), generator=gen)
-        x = prepare_images(images_t[idx], config.augment_crop, 0.0, gen)
-        loss = nn.functional.cross_entropy(head(_features(net, x)), labels_t[idx])
+        feats = _features(net, prepare_images(images_t[idx], crop, 0.0, gen))
+        loss = torch.zeros(())
+        if use_classes:
+            loss = loss + nn.functional.cross_entropy(heads["classes"](feats), labels_t[idx])
+        if use_pose:
+            loss = loss + nn.functional.mse_loss(heads["pose"](feats), targets_t[idx])
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
         loss_sum, n = loss_sum + loss.item(), n + 1
     net.eval()
-    head.eval()
-    every = max(1, len(train_x) // 4096)  # training accuracy on at most about 4,096 frames
-    result = {
-        "classes": classes,
-        "train_accuracy": _accuracy(net, head, train_x[::every], train_y[::every]),
-        "heldout_accuracy": _accuracy(net, head, images[held], labels[held]),
-        "chance": 1.0 / classes,
-        "final_loss": loss_sum / max(n, 1),
-    }
-    record = {**data, "features": {**asdict(config), **result}}
+    for h in heads.values():
+        h.eval()
+    every = max(1, len(train_x) // 4096)  # training figures on at most about 4,096 frames
+    result: dict[str, Any] = {"final_loss": loss_sum / max(n, 1)}
+    if use_classes:
+        result |= {
+            "classes": classes,
+            "train_accuracy": _accuracy(net, heads["classes"], train_x[::every], train_y[::every]),
+            "heldout_accuracy": _accuracy(net, heads["classes"], images[held], labels[held]),
+            "chance": 1.0 / classes,
+        }
+    if use_pose:
+        assert poses is not None
+        heldout = _pose_error(net, heads["pose"], images[held], poses[held], pose_mean)
+        trained = _pose_error(net, heads["pose"], train_x[::every], poses[~held][::every], pose_mean)
+        result |= {
+            "pose_labels": list(POSE_LABELS),
+            "heldout_pose_error_ratio": heldout.get("pose_error_ratio"),
+            "heldout_pose_error_ratios": heldout.get("pose_error_ratios"),
+            "train_pose_error_ratio": trained.get("pose_error_ratio"),
+        }
+    settings = asdict(config)
+    if config.label == "classes":
+        del settings["label"]  # the classifier's records (and checkpoint ids) from before the pose label hold
+    record = {**data, "features": {**settings, **result}}
     _save(out, net, training, record)
     return result
 

@@ -1,10 +1,11 @@
 """Supervised features (Table 5.2's ImageNet column): a catalogued checkpoint whose trunk learned by supervision.
 
 ``nsl features`` renders labelled frames of the 899 train objects (``nsl.collectors.object_frames``), trains
-the trunk of ``--like``'s architecture to classify them (``nsl.learners.train_features``) and catalogues the
-network as ``ckpt:NAME``; with ``--encoder PATH`` the trunk is a torchvision ResNet with the weights in PATH
-instead.  Its head is fresh: fine-tune it with ``nsl train --init ckpt:NAME --method new_head`` (trunk trained
-too) or ``--method new_head_frozen`` (trunk frozen).  Running it again with the same settings returns the
+the trunk of ``--like``'s architecture to classify them, or with ``--label pose`` to tell where the object is
+relative to the camera (``nsl.learners.train_features``), and catalogues the network as ``ckpt:NAME``; with
+``--encoder PATH`` the trunk is a torchvision ResNet with the weights in PATH instead.  Its head is fresh:
+fine-tune it with ``nsl train --init ckpt:NAME --method new_head`` (trunk trained too) or ``--method
+new_head_frozen`` (trunk frozen).  Running it again with the same settings returns the
 checkpoint already made.
 """
 
@@ -31,11 +32,20 @@ class FeaturesResult:
 
     def summary(self) -> str:
         r = self.record
+        parts = []
         if "heldout_accuracy" in r:
-            return (
-                f"{self.checkpoint}: {r['classes']} classes, held-out accuracy {100 * r['heldout_accuracy']:.1f}% "
+            parts.append(
+                f"{r['classes']} classes, held-out accuracy {100 * r['heldout_accuracy']:.1f}% "
                 f"(chance {100 * r['chance']:.2f}%), training accuracy {100 * r['train_accuracy']:.1f}%"
             )
+        if "heldout_pose_error_ratio" in r:
+            per = ", ".join(f"{k} {v:.2f}" for k, v in zip(r["pose_labels"], r["heldout_pose_error_ratios"]))
+            parts.append(
+                f"pose on held-out frames: squared error {r['heldout_pose_error_ratio']:.2f} of the mean's ({per}; "
+                f"training frames {r['train_pose_error_ratio']:.2f})"
+            )
+        if parts:
+            return f"{self.checkpoint}: " + "; ".join(parts)
         return f"{self.checkpoint}: {r['architecture']} trunk from {r['file']} (sha256 {r['sha256'][:12]})"
 
 
@@ -81,8 +91,10 @@ def _features(config: FeaturesConfig, name: str, progress: bool, register: bool)
         else:
             from nsl.collectors import object_frames
 
-            fc = FeatureConfig(steps=config.steps, batch_size=config.batch_size, lr=config.lr, seed=config.seed)
-            images, labels = object_frames(
+            fc = FeatureConfig(
+                steps=config.steps, batch_size=config.batch_size, lr=config.lr, seed=config.seed, label=config.label
+            )
+            images, labels, poses = object_frames(
                 config.frames, config.seed, config.classes, like.architecture.image_size, progress=progress
             )
             frames = {"frames": {"objects": "train", "classes": config.classes, "per_class": config.frames}}
@@ -95,6 +107,7 @@ def _features(config: FeaturesConfig, name: str, progress: bool, register: bool)
                 data=frames,
                 out=final,
                 per_class=config.frames,
+                poses=poses,
                 progress=progress,
             )
     data = json.loads((final / "config.json").read_text())["data"]

@@ -364,6 +364,12 @@ class FeaturesConfig:
         "not trained here",
         metavar="PATH",
     )
+    label: str = option(
+        "classes",
+        "what the trunk learns to predict from the frames: classes (which train object), pose (the object's position "
+        "relative to the camera: a grasp-relevant label the simulator gives for free) or both",
+        choices=("classes", "pose", "both"),
+    )
     classes: int = option(0, "train objects to tell apart; 0: all 899 (the test objects are never shown)")
     frames: int = option(
         24, f"rendered frames per object; the last {FeatureConfig.holdout} of each measure held-out accuracy"

@@ -376,6 +376,7 @@ def _features(unit: Unit, progress: bool, register: bool = True) -> dict[str, An
         frames=p["frames"],
         steps=p["steps"],
         seed=p["seed"],
+        label=p.get("label", "classes"),
     )
     result = features(config, p["checkpoint"], progress=progress, register=register)
     return {"checkpoint": result.checkpoint, "id": result.id, **({} if register else {"made": str(result.path)})}

@@ -206,9 +206,11 @@ class Online:
 
 @dataclass(frozen=True)
 class Supervised:
-    """The supervised features (``nsl features``): the trunk of the base's architecture trained to classify the
-    train objects from rendered frames (the project's ImageNet), or a torchvision ResNet from a file."""
+    """The supervised features (``nsl features``): the trunk of the base's architecture trained on rendered frames of
+    the train objects (the project's ImageNet) to classify them or to locate them, or a torchvision ResNet from a
+    file."""
 
+    label: str = FeaturesConfig.label  # what the trunk learns: classes, pose (relative to the camera) or both
     classes: int = FeaturesConfig.classes  # train objects to tell apart (0: all 899)
     frames: int = FeaturesConfig.frames  # rendered frames per object
     steps: int = FeaturesConfig.steps  # classifier gradient steps
@@ -512,6 +514,8 @@ def validate(plan: Plan) -> None:
         sv = plan.supervised
         for k in ("frames", "steps"):
             _positive(getattr(sv, k), f"supervised.{k}")
+        if sv.label not in ("classes", "pose", "both"):
+            raise ConfigError(f"plan supervised.label = {sv.label!r} is unknown; use classes, pose or both")
         if not isinstance(sv.classes, int) or sv.classes < 0:
             raise ConfigError(f"plan supervised.classes = {sv.classes!r} must be 0 (all train objects) or a count")
         if sv.encoder is not None and not Path(sv.encoder).is_file():

@@ -306,6 +306,7 @@ class _Builder:
                     "steps": sv.steps,
                     "seed": sv.seed,
                     "encoder": sv.encoder,
+                    **({} if sv.label == "classes" else {"label": sv.label}),  # a classifier's units are unchanged
                 },
             )
         )

@@ -14,11 +14,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = add_parser(
         sub,
         "features",
-        help="supervised features: a trunk trained to classify the train objects (or a ResNet from --encoder)",
+        help="supervised features: a trunk trained on frames of the train objects (or a ResNet from --encoder)",
         description=(features.__doc__ or "").strip(),
     )
     p.add_argument("--name", default="features", help="checkpoint name: the result is ckpt:NAME")
-    for name in ("like", "encoder", "classes", "frames", "steps", "batch_size", "lr", "seed"):
+    for name in ("like", "encoder", "label", "classes", "frames", "steps", "batch_size", "lr", "seed"):
         add_field(p, FeaturesConfig, name)
     add_wait(p, "run")
     p.set_defaults(func=run, config=FeaturesConfig)

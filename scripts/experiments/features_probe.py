@@ -36,7 +36,7 @@ def main() -> None:
     ap.add_argument("--plain", action="store_true", help="a bare linear classifier (no batch norm)")
     args = ap.parse_args()
     base = load_checkpoint(Path(nsl.__file__).parent / "assets" / "base")
-    images, labels = object_frames(args.frames, 0, args.classes, base.architecture.image_size)
+    images, labels, _ = object_frames(args.frames, 0, args.classes, base.architecture.image_size)
     torch.manual_seed(0)
     net = QNetwork(NetConfig.from_dict({**base.architecture.to_dict(), "columns": 1})).train()
     channels = net.cfg.feature_channels

@@ -33,6 +33,11 @@ def test_features_are_trained_on_the_train_objects_in_the_bases_architecture_and
         assert cat.resolve_checkpoint("ckpt:feat").id == entry.id
     assert run_cli(*argv[:-1], "feat", "--seed", "1") == 2
     assert "run 'feat' exists with a different configuration" in capsys.readouterr().err
+    # the pose label: where the object is relative to the camera, its error against the mean's
+    assert run_cli(*argv[:-1], "pose", "--label", "pose") == 0
+    out = capsys.readouterr().out
+    assert out.startswith("ckpt:pose@0: pose on held-out frames: squared error ") and "of the mean's (u " in out
+    assert "held-out accuracy" not in out
 
 
 def test_a_resnet_state_dict_becomes_the_features_trunk(tmp_path, capsys):

@@ -71,6 +71,69 @@ def test_the_supervised_trunks_pretraining_is_deterministic_and_learns_the_class
     assert config["training"]["lr"] == 1e-3  # the recipe a fine-tune from it takes a quarter of
 
 
+def _located(per_class: int, classes: int = 4, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Frames of a bright square on a dark noisy field, its position the pose to regress (u, v in pixels, h a
+    constant): any trunk learns where the square is."""
+    rng = np.random.default_rng(seed)
+    n = classes * per_class
+    images = rng.integers(0, 40, (n, 16, 16, 3)).astype(np.uint8)
+    poses = np.zeros((n, 3), np.float32)
+    for i in range(n):
+        y, x = rng.integers(0, 12, 2)
+        images[i, y : y + 4, x : x + 4] = 230
+        poses[i] = (x, y, 1.0)
+    return images, np.repeat(np.arange(classes), per_class), poses
+
+
+def _pose_features(tmp_path, name: str, label: str, steps: int = 150):
+    images, labels, poses = _located(per_class=20)
+    return train_features(
+        images,
+        labels,
+        architecture=TINY_NET,
+        training=TrainConfig(lr=1e-3),
+        config=FeatureConfig(steps=steps, batch_size=32, lr=3e-3, holdout=5, label=label),
+        data={"frames": "squares"},
+        out=tmp_path / name,
+        per_class=20,
+        poses=poses,
+        progress=False,
+    )
+
+
+def test_the_pose_label_trains_the_trunk_to_locate_and_records_its_error_against_the_mean(tmp_path):
+    result = _pose_features(tmp_path, "pose", "pose")
+    assert "heldout_accuracy" not in result
+    ratios = result["heldout_pose_error_ratios"]
+    # held-out frames: far better than predicting the mean position (ratio 1), the constant h aside
+    assert ratios[0] < 0.3 and ratios[1] < 0.3 and result["heldout_pose_error_ratio"] < 1.0
+    features = load_checkpoint(tmp_path / "pose").config["data"]["features"]
+    assert features["label"] == "pose" and features["heldout_pose_error_ratios"] == ratios
+    untrained = _pose_features(tmp_path, "few", "pose", steps=1)
+    assert untrained["heldout_pose_error_ratios"][0] > 2 * ratios[0]  # the fit is the training, not the head
+    both = _pose_features(tmp_path, "both", "both", steps=20)
+    assert {"heldout_accuracy", "heldout_pose_error_ratio"} <= set(both)
+    classes = load_checkpoint(_features(tmp_path, "classes")[0]).config["data"]["features"]
+    assert "label" not in classes  # a classifier's record is what it was before the pose label
+
+
+def test_a_pose_label_without_poses_is_refused(tmp_path):
+    images, labels = _classes(per_class=10)
+    with pytest.raises(ConfigError, match="label 'pose' needs a pose for each of the 40 frames"):
+        train_features(
+            images,
+            labels,
+            architecture=TINY_NET,
+            training=TrainConfig(),
+            config=FeatureConfig(steps=1, label="pose"),
+            data={},
+            out=tmp_path / "x",
+            per_class=10,
+        )
+    with pytest.raises(ConfigError, match="label 'poses' is unknown; use one of classes, pose, both"):
+        FeatureConfig(label="poses")
+
+
 def test_new_head_frozen_trains_only_a_fresh_head_and_new_head_trains_the_trunk_too(tmp_path):
     parent, _ = _features(tmp_path, "features")
     before = load_checkpoint(parent).net.state_dict()

@@ -239,6 +239,9 @@ def test_supervised_baselines_fine_tune_one_features_unit_trained_or_frozen(tmp_
     assert features.kind == "features" and features.params["checkpoint"] == "mini-features"
     assert (features.params["classes"], features.params["frames"], features.params["steps"]) == (3, 3, 4)
     assert features.params["like_ref"] == plan.base  # the base's architecture and recipe
+    assert "label" not in features.params  # a classifier's unit is what it was before the pose label
+    _, posed = _units(text.replace("[supervised]\n", '[supervised]\nlabel = "pose"\n'))
+    assert posed["features:features"].params["label"] == "pose"
     for baseline, method in (("supervised", "new_head"), ("supervised_frozen", "new_head_frozen")):
         u = units[f"train:{baseline}-offset-gripper-n8-k10-s0"]
         assert u.params["method"] == method and u.params["init_ref"] == "ckpt:mini-features@latest"
