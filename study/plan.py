@@ -46,6 +46,7 @@ SHIPPED = (
     "headline",
     "cross-engine",
     "early-stop",
+    "supervised",
     "online",
     "paper",
 )

@@ -397,15 +397,25 @@ def supervised_finding(records: Mapping[str, Any], baselines: Sequence[str], top
 
 
 def features_note(records: Mapping[str, Any]) -> str:
-    """How well the supervised trunk learned its classification task, in one sentence ('' until measured)."""
+    """How well the supervised trunk learned its task (classes, pose or both), a sentence each ('' until measured)."""
     f = records.get("features")
-    if not f or f["heldout_accuracy"] is None:
+    if not f:
         return ""
-    return (
-        f"The supervised trunk classifies {100 * f['heldout_accuracy']:.1f}% of held-out frames of the "
-        f"{f['classes']} train objects (chance {100 * f['chance']:.2f}%; {100 * f['train_accuracy']:.1f}% of its "
-        f"training frames, final loss {f['final_loss']:.2f})."
-    )
+    parts = []
+    if f.get("heldout_accuracy") is not None:
+        parts.append(
+            f"The supervised trunk classifies {100 * f['heldout_accuracy']:.1f}% of held-out frames of the "
+            f"{f['classes']} train objects (chance {100 * f['chance']:.2f}%; {100 * f['train_accuracy']:.1f}% of its "
+            f"training frames, final loss {f['final_loss']:.2f})."
+        )
+    if f.get("heldout_pose_error_ratio") is not None:
+        per = ", ".join(f"{k} {v:.2f}" for k, v in zip(f["pose_labels"], f["heldout_pose_error_ratios"]))
+        parts.append(
+            f"The supervised trunk locates the object relative to the camera on held-out frames with "
+            f"{f['heldout_pose_error_ratio']:.2f} of the squared error of predicting the mean ({per}; "
+            f"{f['train_pose_error_ratio']:.2f} on its training frames; at most 0.5 counts as learned)."
+        )
+    return " ".join(parts)
 
 
 def cross_shift_forgetting(records: Mapping[str, Any]) -> tuple[float, int] | None:

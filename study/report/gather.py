@@ -150,15 +150,20 @@ def online_key(method: str, ratio: float) -> str:
 
 
 def features_accuracy(folder: Path | None) -> dict[str, Any] | None:
-    """What the supervised features' training measured (held-out and training accuracy, chance, classes, final
-    loss), from its checkpoint at ``folder``; None until it exists or for imported weights (``--encoder``)."""
+    """What the supervised features' training measured (held-out and training accuracy, chance and classes for a
+    classifier; held-out and training pose errors against predicting the mean for the pose label; final loss), from
+    its checkpoint at ``folder``; None until it exists or for imported weights (``--encoder``)."""
     from nsl.learners import read_config
 
     if folder is None:
         return None
     got = read_config(Path(folder)).get("data", {}).get("features")
-    keys = ("classes", "heldout_accuracy", "train_accuracy", "chance", "final_loss")
-    return {k: got[k] for k in keys} if got and all(k in got for k in keys) else None
+    if not got:
+        return None
+    classes = ("classes", "heldout_accuracy", "train_accuracy", "chance")
+    pose = ("pose_labels", "heldout_pose_error_ratio", "heldout_pose_error_ratios", "train_pose_error_ratio")
+    out = {k: got[k] for k in (*classes, *pose, "final_loss") if k in got}
+    return out if "final_loss" in out and (all(k in out for k in classes) or all(k in out for k in pose)) else None
 
 
 def weight_changes(plan: Plan, study: str, checkpoint) -> dict[str, dict[str, float]] | None:

@@ -109,6 +109,9 @@ def test_the_pose_label_trains_the_trunk_to_locate_and_records_its_error_against
     assert ratios[0] < 0.3 and ratios[1] < 0.3 and result["heldout_pose_error_ratio"] < 1.0
     features = load_checkpoint(tmp_path / "pose").config["data"]["features"]
     assert features["label"] == "pose" and features["heldout_pose_error_ratios"] == ratios
+    from nsl.study.report.gather import features_accuracy  # what a study's report reads of it
+
+    assert features_accuracy(tmp_path / "pose")["heldout_pose_error_ratio"] == result["heldout_pose_error_ratio"]
     untrained = _pose_features(tmp_path, "few", "pose", steps=1)
     assert untrained["heldout_pose_error_ratios"][0] > 2 * ratios[0]  # the fit is the training, not the head
     both = _pose_features(tmp_path, "both", "both", steps=20)

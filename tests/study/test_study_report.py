@@ -397,6 +397,15 @@ def test_finding_g_compares_rl_pre_training_with_supervised_features_trained_and
         "The supervised trunk classifies 0.2% of held-out frames of the 899 train objects (chance 0.11%; 3.4% of "
         "its training frames, final loss 6.22)."
     )
+    # a trunk trained on the pose label: its held-out error against predicting the mean
+    rec["features"] = {"pose_labels": ["u", "v", "h"], "heldout_pose_error_ratio": 0.31,
+                       "heldout_pose_error_ratios": [0.2, 0.25, 0.48], "train_pose_error_ratio": 0.12,
+                       "final_loss": 0.2}  # fmt: skip
+    assert {f.key: f for f in findings(rec)}["g"].ours.endswith(
+        "The supervised trunk locates the object relative to the camera on held-out frames with 0.31 of the squared "
+        "error of predicting the mean (u 0.20, v 0.25, h 0.48; 0.12 on its training frames; at most 0.5 counts as "
+        "learned)."
+    )
     del rows["offset_gripper"]["baselines"]["supervised_frozen"]
     assert {f.key: f for f in findings(rec)}["g"].holds is None  # not measured everywhere yet
     table = tiers_table(rec).splitlines()
