@@ -66,18 +66,19 @@ def append_judged(path: Path, key: tuple, outcomes: list[bool]) -> None:
 
 
 def plan_of(study: str):
-    from study.driver import _load
+    from nsl.study.driver import _load
 
     return _load(study)
 
 
 def runs_of(plan) -> list:
-    from study.units import early_stop_runs
+    from nsl.study.units import early_stop_runs
 
     return early_stop_runs(plan)
 
 
 def judged_runs(records: Path, meta: dict, judged: dict) -> list:
+    oracle_n, reporting_n = meta["oracle_episodes"], meta["reporting_episodes"]
     """The runs whose curve ended and whose oracle scenes are all evaluated, as JudgedRun."""
     from nsl.eval.records import read_curve
     from nsl.eval.selection import JudgedRun
@@ -91,20 +92,20 @@ def judged_runs(records: Path, meta: dict, judged: dict) -> list:
         if not rows or rows[-1].step != meta["steps"]:
             continue
         oracle = {
-            s.step: judged.get((judged_tag(r["tag"], s.step), s.step, "target", meta["oracle_seed"], ORACLE_EPISODES))
+            s.step: judged.get((judged_tag(r["tag"], s.step), s.step, "target", meta["oracle_seed"], oracle_n))
             for s in rows
         }
         if any(v is None for v in oracle.values()):
             continue
         reporting = {}
         for (tag, step, task, seed, n), o in judged.items():
-            if tag == judged_tag(r["tag"], step) and seed == meta["reporting_seed"] and n == REPORTING_EPISODES:
+            if tag == judged_tag(r["tag"], step) and seed == meta["reporting_seed"] and n == reporting_n:
                 reporting[(step, task)] = o
         out.append(JudgedRun(r["tag"], r["label"], r["seed"], rows, oracle, reporting))
     return out
 
 
-def meta_of(plan) -> dict:
+def meta_of(plan, oracle_episodes: int = ORACLE_EPISODES, reporting_episodes: int = REPORTING_EPISODES) -> dict:
     from nsl import FINAL_REPORTING_SCENES, REPORTING_SCENES
 
     es = plan.early_stop
@@ -121,7 +122,9 @@ def meta_of(plan) -> dict:
         "patience": es.patience,
         "fixed_step": plan.finetune.steps,
         "oracle_seed": REPORTING_SCENES,
+        "oracle_episodes": oracle_episodes,
         "reporting_seed": FINAL_REPORTING_SCENES,
+        "reporting_episodes": reporting_episodes,
         "runs": runs,
     }
 
@@ -129,7 +132,7 @@ def meta_of(plan) -> dict:
 # --- evaluate -----------------------------------------------------------------------------------------------------
 
 
-def evaluate(study: str, workers: int) -> None:
+def evaluate(study: str, workers: int, episodes: tuple[int, int], only: list[str]) -> None:
     from nsl import workspace
     from nsl.collectors import parse_shift_list
     from nsl.eval import EvalConfig, evaluate_outcomes
@@ -138,7 +141,7 @@ def evaluate(study: str, workers: int) -> None:
     from nsl.learners import load_policy
 
     plan = plan_of(study)
-    meta = meta_of(plan)
+    meta = meta_of(plan, *episodes)
     folder = workspace.home() / "studies" / study
     path = folder / JUDGED
     judged = read_judged(path)
@@ -164,9 +167,12 @@ def evaluate(study: str, workers: int) -> None:
         print(f"{tag} step {step} {task} seed {seed}: {100 * sum(outcomes) / len(outcomes):.1f}%", flush=True)
 
     shift_of = {r["tag"]: r["shift"] for r in meta["runs"]}
-    records = folder / "judging"
+    full = episodes == (ORACLE_EPISODES, REPORTING_EPISODES)
+    records = folder / ("judging" if full else f"judging-{episodes[0]}x{episodes[1]}")
     (records / "curves").mkdir(parents=True, exist_ok=True)
     for r in meta["runs"]:
+        if only and r["tag"] not in only:
+            continue
         curve = workspace.home() / "runs" / f"{study}-{r['tag']}" / "curve.csv"
         if not curve.is_file():
             continue
@@ -176,12 +182,12 @@ def evaluate(study: str, workers: int) -> None:
             continue
         shutil.copyfile(curve, records / "curves" / f"{r['tag']}.csv")
         for row in rows:
-            score(r["tag"], row.step, "target", meta["oracle_seed"], ORACLE_EPISODES)
+            score(r["tag"], row.step, "target", meta["oracle_seed"], meta["oracle_episodes"])
     runs = judged_runs(records, meta, judged)
     for tag, steps in needed_reporting(runs, meta["patience"], meta["fixed_step"]).items():
         for step in sorted(steps):
             for task in ("target", "base"):
-                score(tag, step, task, meta["reporting_seed"], REPORTING_EPISODES)
+                score(tag, step, task, meta["reporting_seed"], meta["reporting_episodes"])
     (records / "meta.json").write_text(json.dumps(meta, indent=1) + "\n")
     shutil.copyfile(path, records / JUDGED)
     print(f"{len(runs)} of {len(meta['runs'])} runs judged; records in {records}")
@@ -251,7 +257,7 @@ def plot(records: Path, meta: dict, labels: list[str]) -> None:
 
     cols = min(4, len(labels))
     rows_n = (len(labels) + cols - 1) // cols
-    fig, axes = plt.subplots(rows_n, cols, figsize=(4 * cols, 3.2 * rows_n), sharey=True, squeeze=False)
+    fig, axes = plt.subplots(rows_n, cols, figsize=(4 * cols, 3.2 * rows_n), sharex=True, sharey=True, squeeze=False)
     for ax, label in zip(axes.flat, labels):
         for task, colour in (("target", "tab:blue"), ("base", "tab:grey")):
             curves = []
@@ -280,7 +286,9 @@ def plot(records: Path, meta: dict, labels: list[str]) -> None:
     for ax in axes.flat[len(labels) :]:
         ax.axis("off")
     axes[0][0].set_ylabel("success on 200 selection scenes (%)")
-    axes[0][0].legend(fontsize=8)
+    handles = {h.get_label(): h for ax in axes.flat for h in ax.get_lines() if not h.get_label().startswith("_")}
+    if handles:
+        fig.legend(list(handles.values()), list(handles), loc="lower right", fontsize=8)
     fig.tight_layout()
     fig.savefig(records / "curves.png", dpi=110)
     print(f"wrote {records / 'curves.png'}")
@@ -292,6 +300,15 @@ def main() -> None:
     e = sub.add_parser("evaluate", help="evaluate the finished runs' checkpoints and picks (resumable)")
     e.add_argument("study")
     e.add_argument("--workers", type=int, default=2)
+    e.add_argument(
+        "--episodes",
+        type=int,
+        nargs=2,
+        default=(ORACLE_EPISODES, REPORTING_EPISODES),
+        metavar=("ORACLE", "REPORTING"),
+        help="scenes of each judging set (a smaller pair: a smoke run)",
+    )
+    e.add_argument("--only", nargs="*", default=[], metavar="TAG", help="judge these runs only")
     x = sub.add_parser("export", help="copy the judged records out of the workspace")
     x.add_argument("study")
     x.add_argument("--out", type=Path, required=True)
@@ -299,7 +316,7 @@ def main() -> None:
     r.add_argument("records", type=Path)
     a = ap.parse_args()
     if a.cmd == "evaluate":
-        evaluate(a.study, a.workers)
+        evaluate(a.study, a.workers, tuple(a.episodes), a.only)
     elif a.cmd == "export":
         export(a.study, a.out)
     else:
