@@ -345,6 +345,7 @@ def _train(unit: Unit, workers: int, progress: bool, register: bool = True) -> d
         precision=p.get("precision", "fp32"),
         device=p.get("device", "auto"),
         learner=p.get("learner", "qtopt"),
+        **({"shrink_perturb": tuple(p["shrink_perturb"])} if p.get("shrink_perturb") else {}),
         **({"holdout": m["holdout"]} if m.get("holdout") else {}),
         **({"criterion": m["criterion"]} if m.get("criterion") else {}),  # fqe: FQE's estimate on the curve too
     )

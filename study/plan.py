@@ -47,6 +47,7 @@ SHIPPED = (
     "cross-engine",
     "early-stop",
     "supervised",
+    "plasticity",
     "online",
     "paper",
 )
@@ -220,6 +221,22 @@ class Supervised:
 
 
 @dataclass(frozen=True)
+class Plasticity:
+    """Plasticity or data (finding (d)): why the continual sequence's late stage learns its shift less than a
+    single step does.  A 2x2 on ``shift``: start from {the base, the continual sequence's stage ``stage`` policy
+    (its first seed)} and fine-tune on {the base's ``episodes`` episodes of the shift, that policy's own}, each with
+    every seed; plus shrink and perturb of the stage's policy (``alpha`` * its weights + ``sigma`` * a fresh
+    initialisation; empty: none) on the base's episodes."""
+
+    shift: str = "offset_gripper@0.25"
+    stage: int = 4  # the continual stage whose policy is the second start and the second collector
+    episodes: int = 800
+    steps: int = FINE_TUNE_STEPS
+    seeds: tuple[int, ...] = (0, 1, 2)
+    shrink_perturb: tuple[float, ...] = (0.8, 0.01)  # (alpha, sigma); () leaves the arm out
+
+
+@dataclass(frozen=True)
 class Plan:
     name: str  # default study name (folder $NSL_HOME/studies/NAME)
     base: str = "ckpt:base"  # the base checkpoint
@@ -249,12 +266,13 @@ class Plan:
     early_stop: EarlyStop | None = field(default_factory=EarlyStop)
     supervised: Supervised | None = None  # set when a supervised baseline is asked for (defaults if not given)
     online: Online | None = None  # online fine-tuning in rounds (off unless the plan has [online])
+    plasticity: Plasticity | None = None  # plasticity or data, a 2x2 (off unless the plan has [plasticity])
     source: str = ""  # where the plan was read from (not part of its identity)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d.pop("source")
-        for key in ("supervised", "online"):
+        for key in ("supervised", "online", "plasticity"):
             if d[key] is None:
                 del d[key]  # an absent section: plans made before it keep their record
         return d
@@ -270,6 +288,7 @@ SECTIONS = {
     "early_stop": EarlyStop,
     "supervised": Supervised,
     "online": Online,
+    "plasticity": Plasticity,
 }
 
 
@@ -306,7 +325,7 @@ def parse_plan(data: dict[str, Any], source: str = "", default_name: str = "stud
     for key, cls in SECTIONS.items():
         if key not in data:
             continue
-        if data[key] in (False, None) and key in ("continual", "curves", "early_stop", "online"):
+        if data[key] in (False, None) and key in ("continual", "curves", "early_stop", "online", "plasticity"):
             sections[key] = None  # `continual = false` switches an experiment off
             continue
         table = data[key]
@@ -511,6 +530,28 @@ def validate(plan: Plan) -> None:
             raise ConfigError("plan [online] has no methods and no ratios; name at least one run")
         if not isinstance(o.seed, int) or o.seed < 0:
             raise ConfigError(f"plan online.seed = {o.seed!r} must be a seed >= 0")
+    if plan.plasticity is not None:
+        pl = plan.plasticity
+        _shift(pl.shift, "plasticity.shift")
+        for k in ("stage", "episodes", "steps"):
+            _positive(getattr(pl, k), f"plasticity.{k}")
+        _seeds(pl.seeds, "plasticity.seeds")
+        stages = 0 if plan.continual is None else len(plan.continual.sequence)
+        if pl.stage > stages:
+            raise ConfigError(
+                f"plan plasticity.stage = {pl.stage} needs a continual sequence of at least {pl.stage} stages; "
+                f"this plan's has {stages} (set [continual] sequence)"
+            )
+        if pl.episodes > c.episodes:
+            raise ConfigError(
+                f"plan plasticity.episodes = {pl.episodes} is above the collection size collect.episodes = {c.episodes}"
+            )
+        sp = pl.shrink_perturb
+        if sp and (len(sp) != 2 or not 0 < sp[0] <= 1 or sp[1] < 0):
+            raise ConfigError(
+                f"plan plasticity.shrink_perturb = {list(sp)} must be [alpha, sigma] with 0 < alpha <= 1 and "
+                "sigma >= 0, or [] for no such arm"
+            )
     if plan.supervised is not None:
         sv = plan.supervised
         for k in ("frames", "steps"):

@@ -232,6 +232,7 @@ class _Builder:
         more: Sequence[tuple[str, int]] = (),
         share: float = 0.5,
         base: Sequence[str] = (),
+        shrink_perturb: Sequence[float] | None = None,
     ) -> str:
         """A training run on the first K episodes of ``data`` (None: base data alone), mixed with base data if
         ``mixed``: the target data at ``share`` of each batch; ``more`` target data (online rounds) share it with
@@ -281,6 +282,7 @@ class _Builder:
                     **({"more_targets": extra} if extra else {}),  # online rounds: every round's data so far
                     "checkpoint_every": self.plan.checkpoint_every,
                     "monitor": None if monitor is None else dict(monitor),
+                    **({"shrink_perturb": list(shrink_perturb)} if shrink_perturb else {}),
                     # fp32 is left out, so the units of plans made before the setting keep their parameters
                     **({} if self.plan.precision == "fp32" else {"precision": self.plan.precision}),
                     **({} if self.plan.learner == "qtopt" else {"learner": self.plan.learner}),
@@ -428,6 +430,8 @@ class _Builder:
                     self.evaluate(tag, shift)
         if p.continual is not None:
             self._continual()
+        if p.plasticity is not None:
+            self._plasticity()
         if p.online is not None:
             self._online()
         if p.curves is not None:
@@ -499,6 +503,54 @@ class _Builder:
                 )
                 self.evaluate(single, shift)
                 policy = tag
+
+    def _plasticity(self) -> None:
+        """The 2x2 of plasticity or data, and the shrink-and-perturb arm; each evaluated on the shift and the base."""
+        pl = self.plan.plasticity
+        assert pl is not None
+        for tag, init, collector, seed in plasticity_runs(self.plan):
+            data = self.target_data(pl.shift, pl.episodes, collector)
+            sp = pl.shrink_perturb if tag.startswith(f"pl-c{pl.stage}sp-") else None
+            self.train(tag, pl.shift, data, method="ft", init=init, steps=pl.steps, seed=seed, shrink_perturb=sp)
+            self.evaluate(tag, pl.shift)
+            self.evaluate(tag, "base")
+
+
+PLASTICITY_ARMS = ("base/base", "base/stage", "stage/base", "stage/stage", "stage-sp/base")  # start/data
+
+
+def plasticity_runs(plan: Plan) -> list[tuple[str, str, str, int]]:
+    """(train tag, start policy, collecting policy, seed) of every run of the plan's [plasticity], arm by arm
+    (:data:`PLASTICITY_ARMS`).  The base on its own episodes is the single-step fine-tune (its tag is shared)."""
+    pl = plan.plasticity
+    if pl is None:
+        return []
+    stage = continual_tags(plan)[pl.stage - 1]
+    out = []
+    for arm in PLASTICITY_ARMS:
+        start, data = arm.split("/")
+        if start == "stage-sp" and not pl.shrink_perturb:
+            continue
+        init = BASE_POLICY if start == "base" else stage
+        collector = BASE_POLICY if data == "base" else stage
+        for seed in pl.seeds:
+            if arm == "base/base":
+                tag = train_tag("ft", pl.shift, pl.episodes, pl.steps, seed)
+            elif arm == "stage/stage" and _is_next_stage(plan, seed):
+                tag = continual_tags(plan)[pl.stage]  # the sequence's own next stage is this run
+            else:
+                label = f"c{pl.stage}" + ("sp" if start == "stage-sp" else "") if start != "base" else "base"
+                by = "base" if data == "base" else f"c{pl.stage}"
+                tag = f"pl-{label}-{by}-{slug(pl.shift)}-n{pl.episodes}-k{pl.steps}-s{seed}"
+            out.append((tag, init, collector, seed))
+    return out
+
+
+def _is_next_stage(plan: Plan, seed: int) -> bool:
+    pl, c = plan.plasticity, plan.continual
+    assert pl is not None and c is not None
+    same = (pl.episodes, pl.steps, seed) == (c.episodes, c.steps, c.seeds[0])
+    return same and pl.stage < len(c.sequence) and c.sequence[pl.stage] == pl.shift
 
 
 def continual_tags(plan: Plan, seed: int | None = None) -> list[str]:

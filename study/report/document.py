@@ -18,6 +18,7 @@ from .tables import (
     findings_table,
     headline_table,
     online_table,
+    plasticity_table,
     tiers_base_table,
     tiers_table,
     weight_change_table,
@@ -134,6 +135,19 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
             "Performance matrix (rows: after each stage; columns: evaluated task):",
             continual_matrix_table(records),
         )
+    if plan.get("plasticity"):
+        pl = plan["plasticity"]
+        table = plasticity_table(records)
+        if table:
+            parts += _blocks(
+                "## Plasticity or data (finding (d))",
+                f"{pretty(pl['shift'])}: fine-tunes of {pl['steps']} steps on {pl['episodes']} target episodes "
+                f"(seeds {', '.join(map(str, pl['seeds']))}), from the base or from the continual sequence's stage "
+                f"{pl['stage']} policy, on the episodes the base collected or those that policy collected. If the "
+                "start explains the sequence's shortfall, the start's contrasts are negative whatever the data; if "
+                "the data does, the data's are.",
+                table,
+            )
     if plan.get("curves"):
         cv = plan["curves"]
         parts += _blocks(

@@ -365,3 +365,61 @@ def headline_table(records: Mapping[str, Any]) -> str:
         ],
         rows,
     )
+
+
+def _rate(r: Any) -> str:
+    return f"{100 * r.mean:.1f}% [{100 * r.low:.1f}, {100 * r.high:.1f}]"
+
+
+def plasticity_table(records: Mapping[str, Any]) -> str:
+    """Plasticity or data: each arm's success on the shift and the base task (seed means with their hierarchical
+    intervals over seeds and scenes), then the contrasts that separate the two causes, paired on the scenes:
+    the start's effect with each data (base start - stage start), the data's effect with each start (the stage's
+    episodes - the base's), and shrink and perturb against the stage's policy fine-tuned as it is; '' until an arm
+    is measured."""
+    from nsl.stats import hierarchical_difference, hierarchical_rate
+
+    arms = records.get("plasticity") or {}
+    pl = records["plan"]["plasticity"]
+    stage = f"stage {pl['stage']}"
+
+    def outcomes(arm: str, task: str) -> Any:
+        cells = (arms.get(arm) or {}).get(task) or []
+        if not cells or any(c is None or not c.get("outcomes") for c in cells):
+            return None
+        return [[[int(x) for x in c["outcomes"]] for c in cells]]  # (1 collection, seeds, scenes)
+
+    names = {
+        "base/base": ("the base", "the base's"),
+        "base/stage": ("the base", f"the {stage} policy's"),
+        "stage/base": (f"the {stage} policy", "the base's"),
+        "stage/stage": (f"the {stage} policy", f"the {stage} policy's"),
+        "stage-sp/base": (f"the {stage} policy, shrunk and perturbed {tuple(pl['shrink_perturb'])}", "the base's"),
+    }
+    rows = []
+    for arm, (start, data) in names.items():
+        if arm not in arms:
+            continue
+        cells = ["-" if (o := outcomes(arm, t)) is None else _rate(hierarchical_rate(o)) for t in ("shift", "base")]
+        rows.append([start, data, *cells])
+    if not any(c != "-" for r in rows for c in r[2:]):
+        return ""
+    contrasts = [
+        ("start: the base - the stage policy, on the base's episodes", "base/base", "stage/base"),
+        (f"start: the base - the stage policy, on the {stage} policy's episodes", "base/stage", "stage/stage"),
+        (f"data: the {stage} policy's - the base's episodes, from the base", "base/stage", "base/base"),
+        (f"data: the {stage} policy's - the base's episodes, from the stage policy", "stage/stage", "stage/base"),
+        ("shrink and perturb - the stage policy as it is, on the base's episodes", "stage-sp/base", "stage/base"),
+    ]
+    lines = [
+        pipe_table(["start", "target episodes", "success on the shift [95%]", "base task [95%]"], rows),
+        "",
+    ]
+    crows = []
+    for label, a, b in contrasts:
+        x, y = outcomes(a, "shift"), outcomes(b, "shift")
+        if x is not None and y is not None:
+            crows.append([label, hierarchical_difference(x, y).points()])
+    if crows:
+        lines.append(pipe_table(["contrast, on the shift", "points [95%, seeds and scenes, paired]"], crows))
+    return "\n".join(lines)

@@ -149,7 +149,10 @@ def test_shipped_plans_parse_and_build_a_graph(name):
         assert {d.name: d.weight for d in plan.base_data.datasets} == pytest.approx(
             {n: w for n, w in recorded.items() if n.startswith("grasp-base-")}, abs=1e-3
         )
-        assert plan.shifts == (("engine:pybullet",) if name == "cross-engine" else STUDY_SHIFTS)
+        own = {"cross-engine": ("engine:pybullet",), "plasticity": (STUDY_SHIFTS[-1],)}  # one shift of their own
+        assert plan.shifts == own.get(name, STUDY_SHIFTS)
+        if name == "plasticity":  # the 2x2 on the sequence's last stage, started from the stage before it
+            assert plan.continual.sequence == STUDY_SHIFTS and plan.plasticity.shift == STUDY_SHIFTS[-1]
     if name in ("full", "paper"):
         assert plan.collect.episodes == 800 and plan.finetune.tiers == (25, 50, 100, 200, 400, 800)
         assert len(plan.shifts) == 5 and len(plan.continual.sequence) == 5

@@ -548,3 +548,29 @@ def test_the_headline_covers_collections_seeds_and_scenes_and_judges_finding_b_a
     for row in rec["finetune"].values():  # no outcomes at all: no headline section
         row["tiers"]["8"] = [c(70)] * 3
     assert "## The headline" not in render(rec, None, {})
+
+
+def test_the_plasticity_table_gives_each_arm_and_the_paired_contrasts():
+    from nsl.study.report import plasticity_table
+
+    text = RECORDS_PLAN + '\n[plasticity]\nshift = "offset_gripper"\nstage = 1\nepisodes = 8\nsteps = 10\n'
+    rec = records(plan=parse_plan(tomllib.loads(text), default_name="mini").to_dict())
+    assert plasticity_table(rec) == ""  # nothing measured yet
+
+    def cell(k: int, n: int = 200) -> dict:  # the first k of n scenes succeed
+        return {"successes": k, "episodes": n, "outcomes": "1" * k + "0" * (n - k)}
+
+    # the stage policy as a start costs 20 points whatever the data; its data costs nothing
+    rates = {"base/base": 140, "base/stage": 140, "stage/base": 100, "stage/stage": 100, "stage-sp/base": 130}
+    rec["plasticity"] = {a: {"shift": [cell(k)] * 3, "base": [cell(160)] * 3} for a, k in rates.items()}
+    lines = plasticity_table(rec).splitlines()
+    assert lines[2].startswith("| the base | the base's | 70.0% [") and "| 80.0% [" in lines[2]
+    assert lines[4].startswith("| the stage 1 policy | the base's | 50.0% [")
+    assert lines[6].startswith("| the stage 1 policy, shrunk and perturbed (0.8, 0.01) | the base's | 65.0% [")
+    contrasts = {row.split(" | ")[0].strip("| "): row.split(" | ")[1] for row in lines[10:]}
+    assert contrasts["start: the base - the stage policy, on the base's episodes"].startswith("+20.0 [")
+    assert contrasts["data: the stage 1 policy's - the base's episodes, from the base"] == "+0.0 [+0.0, +0.0] |"
+    assert contrasts["shrink and perturb - the stage policy as it is, on the base's episodes"].startswith("+15.0 [")
+    assert "## Plasticity or data (finding (d))" in render(rec, None, {})
+    del rec["plasticity"]["stage/stage"]  # an arm not measured leaves its row and its contrasts out
+    assert "from the stage policy" not in plasticity_table(rec)

@@ -375,3 +375,58 @@ base = ["mini-base-oracle"]
         _units(text.replace('base = ["mini-base-oracle"]', 'base = ["grasp-base-oracle"]'))
     with pytest.raises(ConfigError, match="above the collection size"):
         _units(text.replace("episodes = 4\nbase", "episodes = 400\nbase"))
+
+
+PLASTICITY = '\n[plasticity]\nshift = "offset_gripper"\nstage = 1\nepisodes = 8\nsteps = 10\nseeds = [0, 1]\n'
+
+
+def test_plasticity_crosses_two_starts_with_two_collectors_and_adds_shrink_and_perturb():
+    from nsl.study.units import plasticity_runs
+
+    plan, units = _units(MINI_PLAN + PLASTICITY)
+    runs = plasticity_runs(plan)
+    stage1 = "ft-harsh-lighting-n8-k10-s0"  # the sequence's first stage (harsh lighting) is the second start
+    assert len(runs) == 10  # four arms and shrink and perturb, two seeds each
+    by = {(init, collector, tag.split("-")[1]) for tag, init, collector, _ in runs}
+    assert by >= {
+        ("base", "base", "offset"),
+        ("base", stage1, "base"),
+        (stage1, "base", "c1"),
+        (stage1, "base", "c1sp"),
+    }
+    # the base on its own episodes is the single-step fine-tune; the stage policy on its own, with the sequence's
+    # seed, is the sequence's next stage: both run once however many experiments need them
+    tags = [tag for tag, *_ in runs]
+    assert "ft-offset-gripper-n8-k10-s0" in tags and "c2-offset-gripper-n8-k10-s0" in tags
+    sp = units["train:pl-c1sp-base-offset-gripper-n8-k10-s1"]
+    assert sp.params["shrink_perturb"] == [0.8, 0.01] and sp.params["init_ref"].endswith(f"{stage1}@latest")
+    assert f"train:{stage1}" in sp.deps
+    own = units["train:pl-c1-c1-offset-gripper-n8-k10-s1"]
+    assert own.params["target"]["dataset"] == f"mini-offset-gripper-by-{stage1}"
+    assert "shrink_perturb" not in own.params
+    for tag in tags:
+        assert f"eval:{tag}:offset_gripper" in units and f"eval:{tag}:base" in units
+    _, none = _units(MINI_PLAN + PLASTICITY.replace("seeds = [0, 1]\n", "seeds = [0, 1]\nshrink_perturb = []\n"))
+    assert not any(n.startswith("train:pl-c1sp") for n in none)
+
+
+def test_a_bad_plasticity_section_is_refused_in_one_line():
+    import pytest
+
+    from nsl.errors import ConfigError
+
+    for change, message in (
+        ("stage = 3", "plasticity.stage = 3 needs a continual sequence of at least 3 stages; this plan's has 2"),
+        ("episodes = 9", "plasticity.episodes = 9 is above the collection size"),
+        ("shrink_perturb = [1.5, 0.1]", "must be [alpha, sigma] with 0 < alpha <= 1"),
+    ):
+        key = change.split(" = ")[0]
+        text = (
+            MINI_PLAN
+            + "\n".join(change if line.startswith(key + " ") else line for line in PLASTICITY.splitlines())
+            + ("\n" + change if key == "shrink_perturb" else "")
+            + "\n"
+        )
+        with pytest.raises(ConfigError, match=message.replace("[", r"\[")) as err:
+            parse_plan(tomllib.loads(text), default_name="mini")
+        assert "\n" not in str(err.value)
