@@ -11,7 +11,8 @@ Q-ranking AUC, TD error, average Q, FQE) on held-out target episodes.  This scri
     the final reporting scenes (seed 51425, 500 scenes), on the shift and on the base task.
   It costs 21 x 500 + about 6 x 1,000 episodes per run: about 12 minutes per run on this 2-core machine.
 
-``export STUDY --out DIR``: copies the curves and the judged outcomes into DIR (the committed records).
+``export STUDY --out DIR``: copies the curves and the judged outcomes into DIR (the committed records);
+``curves STUDY --out DIR`` copies only the finished runs' curves, while the study still runs.
 
 ``report DIR``: from the committed records alone, prints the criteria table (criterion x shift: chosen steps,
 reporting success, regret against the oracle with its hierarchical interval over seeds and scenes, Spearman's
@@ -193,6 +194,26 @@ def evaluate(study: str, workers: int, episodes: tuple[int, int], only: list[str
     print(f"{len(runs)} of {len(meta['runs'])} runs judged; records in {records}")
 
 
+def curves(study: str, out: Path) -> None:
+    """Copy the finished runs' curves and the plan's facts to ``out`` (no evaluation): the Fig. 5.7 part of the
+    records, safe to commit while the study still runs."""
+    from nsl import workspace
+    from nsl.eval.records import read_curve
+
+    meta = meta_of(plan_of(study))
+    (out / "curves").mkdir(parents=True, exist_ok=True)
+    done = 0
+    for r in meta["runs"]:
+        path = workspace.home() / "runs" / f"{study}-{r['tag']}" / "curve.csv"
+        rows = read_curve(path) if path.is_file() else []
+        if rows and rows[-1].step == meta["steps"]:
+            shutil.copyfile(path, out / "curves" / f"{r['tag']}.csv")
+            done += 1
+    if not (out / "meta.json").is_file():
+        (out / "meta.json").write_text(json.dumps(meta, indent=1) + "\n")
+    print(f"{done} of {len(meta['runs'])} runs finished; their curves are in {out / 'curves'}")
+
+
 def export(study: str, out: Path) -> None:
     from nsl import workspace
 
@@ -309,6 +330,9 @@ def main() -> None:
         help="scenes of each judging set (a smaller pair: a smoke run)",
     )
     e.add_argument("--only", nargs="*", default=[], metavar="TAG", help="judge these runs only")
+    c = sub.add_parser("curves", help="copy the finished runs' curves out of the workspace (no evaluation)")
+    c.add_argument("study")
+    c.add_argument("--out", type=Path, required=True)
     x = sub.add_parser("export", help="copy the judged records out of the workspace")
     x.add_argument("study")
     x.add_argument("--out", type=Path, required=True)
@@ -317,6 +341,8 @@ def main() -> None:
     a = ap.parse_args()
     if a.cmd == "evaluate":
         evaluate(a.study, a.workers, tuple(a.episodes), a.only)
+    elif a.cmd == "curves":
+        curves(a.study, a.out)
     elif a.cmd == "export":
         export(a.study, a.out)
     else:
