@@ -30,7 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import networkx as nx
 
@@ -508,9 +508,9 @@ class _Builder:
         """The 2x2 of plasticity or data, and the shrink-and-perturb arm; each evaluated on the shift and the base."""
         pl = self.plan.plasticity
         assert pl is not None
-        for tag, init, collector, seed in plasticity_runs(self.plan):
+        for tag, init, collector, seed, arm in plasticity_runs(self.plan):
             data = self.target_data(pl.shift, pl.episodes, collector)
-            sp = pl.shrink_perturb if tag.startswith(f"pl-c{pl.stage}sp-") else None
+            sp = pl.shrink_perturb if arm == "stage-sp/base" else None
             self.train(tag, pl.shift, data, method="ft", init=init, steps=pl.steps, seed=seed, shrink_perturb=sp)
             self.evaluate(tag, pl.shift)
             self.evaluate(tag, "base")
@@ -519,8 +519,16 @@ class _Builder:
 PLASTICITY_ARMS = ("base/base", "base/stage", "stage/base", "stage/stage", "stage-sp/base")  # start/data
 
 
-def plasticity_runs(plan: Plan) -> list[tuple[str, str, str, int]]:
-    """(train tag, start policy, collecting policy, seed) of every run of the plan's [plasticity], arm by arm
+class PlasticityRun(NamedTuple):
+    tag: str  # the train tag
+    init: str  # the start policy
+    collector: str  # the policy whose episodes it fine-tunes on
+    seed: int
+    arm: str  # one of PLASTICITY_ARMS
+
+
+def plasticity_runs(plan: Plan) -> list[PlasticityRun]:
+    """(train tag, start policy, collecting policy, seed, arm) of every run of the plan's [plasticity], arm by arm
     (:data:`PLASTICITY_ARMS`).  The base on its own episodes is the single-step fine-tune (its tag is shared)."""
     pl = plan.plasticity
     if pl is None:
@@ -542,7 +550,7 @@ def plasticity_runs(plan: Plan) -> list[tuple[str, str, str, int]]:
                 label = f"c{pl.stage}" + ("sp" if start == "stage-sp" else "") if start != "base" else "base"
                 by = "base" if data == "base" else f"c{pl.stage}"
                 tag = f"pl-{label}-{by}-{slug(pl.shift)}-n{pl.episodes}-k{pl.steps}-s{seed}"
-            out.append((tag, init, collector, seed))
+            out.append(PlasticityRun(tag, init, collector, seed, arm))
     return out
 
 

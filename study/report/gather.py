@@ -13,7 +13,6 @@ from ..plan import Plan
 from ..units import (
     BASE_POLICY,
     FEATURES_POLICY,
-    PLASTICITY_ARMS,
     continual_tags,
     early_stop_runs,
     no_target_tag,
@@ -125,10 +124,10 @@ def gather(plan: Plan, study: str, evaluation, read_curve_file, checkpoint=None)
             }
     if plan.plasticity is not None:  # plasticity or data: each arm's runs on the shift and on the base task
         arms: dict[str, dict[str, list]] = {}
-        for (tag, _, _, _), arm in zip(plasticity_runs(plan), _arm_of_runs(plan)):
-            a = arms.setdefault(arm, {"shift": [], "base": []})
-            a["shift"].append(ev(tag, plan.plasticity.shift))
-            a["base"].append(ev(tag, "base"))
+        for run in plasticity_runs(plan):
+            a = arms.setdefault(run.arm, {"shift": [], "base": []})
+            a["shift"].append(ev(run.tag, plan.plasticity.shift))
+            a["base"].append(ev(run.tag, "base"))
         out["plasticity"] = arms
     if plan.curves is not None:
         cv = plan.curves
@@ -156,14 +155,6 @@ def _rows(rows: Sequence[CurveRow] | None) -> list[dict] | None:
 def online_key(method: str, ratio: float) -> str:
     """A run of the online records: ``ft@0.5``."""
     return f"{method}@{ratio:g}"
-
-
-def _arm_of_runs(plan: Plan) -> list[str]:
-    """The arm (PLASTICITY_ARMS) of each of :func:`plasticity_runs`' runs, in order."""
-    pl = plan.plasticity
-    assert pl is not None
-    arms = [a for a in PLASTICITY_ARMS if pl.shrink_perturb or not a.startswith("stage-sp")]
-    return [a for a in arms for _ in pl.seeds]
 
 
 def features_accuracy(folder: Path | None) -> dict[str, Any] | None:

@@ -387,7 +387,7 @@ def test_plasticity_crosses_two_starts_with_two_collectors_and_adds_shrink_and_p
     runs = plasticity_runs(plan)
     stage1 = "ft-harsh-lighting-n8-k10-s0"  # the sequence's first stage (harsh lighting) is the second start
     assert len(runs) == 10  # four arms and shrink and perturb, two seeds each
-    by = {(init, collector, tag.split("-")[1]) for tag, init, collector, _ in runs}
+    by = {(r.init, r.collector, r.tag.split("-")[1]) for r in runs}
     assert by >= {
         ("base", "base", "offset"),
         ("base", stage1, "base"),
@@ -396,7 +396,7 @@ def test_plasticity_crosses_two_starts_with_two_collectors_and_adds_shrink_and_p
     }
     # the base on its own episodes is the single-step fine-tune; the stage policy on its own, with the sequence's
     # seed, is the sequence's next stage: both run once however many experiments need them
-    tags = [tag for tag, *_ in runs]
+    tags = [r.tag for r in runs]
     assert "ft-offset-gripper-n8-k10-s0" in tags and "c2-offset-gripper-n8-k10-s0" in tags
     sp = units["train:pl-c1sp-base-offset-gripper-n8-k10-s1"]
     assert sp.params["shrink_perturb"] == [0.8, 0.01] and sp.params["init_ref"].endswith(f"{stage1}@latest")
