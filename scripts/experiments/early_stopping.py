@@ -236,6 +236,7 @@ def report(records: Path) -> None:
     labels = list(dict.fromkeys(r["label"] for r in meta["runs"]))
     print(f"{len(runs)} of {len(meta['runs'])} runs judged")
     plot(records, meta, labels)
+    curve_means(records, meta, labels)
     plain = {x["shift"] for x in meta["runs"]}
     main = [r for r in runs if r.shift in plain]  # the five shifts at the plan's tier (label = shift)
     extra = [r for r in runs if r.shift not in plain]
@@ -264,6 +265,30 @@ def report(records: Path) -> None:
                     f"| {name} | {s.shift or '**mean**'} | {' '.join(map(str, s.steps)) if s.shift else ''} | "
                     f"{100 * s.target.mean:.1f}% | {s.regret.points()} | {rho} | {100 * s.base.mean:.1f}% |"
                 )
+
+
+def curve_means(records: Path, meta: dict, labels: list[str]) -> None:
+    """The finished runs' seed means on the selection scenes, shift / base task: at step 0, at the shift's peak,
+    at the recipe's step and at the last step."""
+    from nsl.eval.records import read_curve
+
+    print(f"\n| runs | seeds | step 0 | peak (step) | step {meta['fixed_step']} | step {meta['steps']} |")
+    print("|---|---|---|---|---|---|")
+    for label in labels:
+        paths = [records / "curves" / f"{r['tag']}.csv" for r in meta["runs"] if r["label"] == label]
+        curves = [{x.step: x for x in read_curve(p)} for p in paths if p.is_file()]
+        if not curves:
+            continue
+
+        def at(step: int, curves: list = curves) -> str:
+            t = sum(c[step].target.success_rate for c in curves) / len(curves)
+            b = sum(c[step].base.success_rate for c in curves) / len(curves)
+            return f"{100 * t:.1f} / {100 * b:.1f}"
+
+        steps = sorted(set.intersection(*(set(c) for c in curves)))
+        peak = max(steps, key=lambda s: (sum(c[s].target.success_rate for c in curves), -s))
+        last = meta["steps"]
+        print(f"| {label} | {len(curves)} | {at(0)} | {at(peak)} ({peak}) | {at(meta['fixed_step'])} | {at(last)} |")
 
 
 def plot(records: Path, meta: dict, labels: list[str]) -> None:
