@@ -10,6 +10,33 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # must precede any mujoco import
 
 import pytest
 
+# `make test` runs the suite on two pytest-xdist workers (``--dist loadgroup --no-loadscope-reorder``).  The tests
+# that share the study folder's session-scoped runs (the mini and the micro plan, each a minute or more of CPU) join
+# one group per run, wherever their module is; a module whose tests share one run only joins that run's group whole
+# (``pytestmark``), so its module-scoped fixtures (a cluster, a transfer study) are built once, beside the run.  Every
+# other module is a group of its own.  The shared runs' groups go first, so the longest chains of work start at once
+# and the rest fills in beside them.  Each worker computes on one thread (two workers on two cores): torch's threads
+# on oversubscribed cores wait on each other, and made the longest fixtures 2.5x slower.
+SHARED_RUNS = ("mini_run", "micro_run")
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+
+
+def _group(item) -> str:
+    mark = item.get_closest_marker("xdist_group")
+    return mark.args[0] if mark is not None else item.nodeid.split("::", 1)[0]
+
+
+def pytest_itemcollected(item):
+    if item.get_closest_marker("xdist_group") is None:
+        shared = [f for f in SHARED_RUNS if f in getattr(item, "fixturenames", ())]
+        item.add_marker(pytest.mark.xdist_group(shared[0] if shared else item.nodeid.split("::", 1)[0]))
+
+
+def pytest_collection_modifyitems(config, items):
+    items.sort(key=lambda item: _group(item) not in SHARED_RUNS)  # stable: the rest keep their order
+
 
 @pytest.fixture(autouse=True)
 def nsl_home(tmp_path_factory, monkeypatch):

@@ -13,6 +13,9 @@ from nsl.study.units import BaseSource
 from tests.conftest import run_cli
 from tests.study.test_transfer import MINI_TRANSFER
 
+# its tests share the mini plan's run: one xdist worker takes them all (tests/conftest.py)
+pytestmark = pytest.mark.xdist_group("mini_run")
+
 THREE = {
     "name": "x3",
     "study": "s",

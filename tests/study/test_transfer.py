@@ -14,6 +14,9 @@ from nsl.study.transfer import build_transfer_units
 from nsl.study.units import BaseSource, unit_graph
 from tests.conftest import run_cli
 
+# its tests share the mini plan's run: one xdist worker takes them all (tests/conftest.py)
+pytestmark = pytest.mark.xdist_group("mini_run")
+
 # Two tasks of the mini study (tests/study/conftest.py): the base task (its data collected here) and harsh lighting.
 MINI_TRANSFER = """
 name = "xmini"
