@@ -49,11 +49,9 @@ class JudgedRun:
     reporting: Mapping[tuple[int, str], Sequence[bool]]
 
 
-def run_picks(
-    rows: Sequence[CurveRow], oracle_scenes: Mapping[int, Sequence[bool]], patience: int | None, fixed_step: int
-) -> dict[str, int]:
+def curve_picks(rows: Sequence[CurveRow], patience: int | None, fixed_step: int) -> dict[str, int]:
     """Each criterion's step on the curve (with ``patience``, as a run that stops would), the whole-curve best
-    on selection scenes, ``fixed``, ``final`` and the oracle's (ties to the earlier step)."""
+    on selection scenes, ``fixed`` and ``final``: every pick that needs nothing but the run's own records."""
     steps = sorted(r.step for r in rows)
     if not steps:
         raise ConfigError("judging criteria needs a recorded curve; this run has none")
@@ -64,6 +62,15 @@ def run_picks(
     if fixed_step not in steps:
         raise ConfigError(f"the fixed step {fixed_step} is not on the curve (steps {steps[0]}..{steps[-1]})")
     out["fixed"], out["final"] = fixed_step, steps[-1]
+    return out
+
+
+def run_picks(
+    rows: Sequence[CurveRow], oracle_scenes: Mapping[int, Sequence[bool]], patience: int | None, fixed_step: int
+) -> dict[str, int]:
+    """:func:`curve_picks` and the oracle's: the best checkpoint on its own scenes (ties to the earlier step)."""
+    out = curve_picks(rows, patience, fixed_step)
+    steps = sorted(r.step for r in rows)
     missing = [s for s in steps if s not in oracle_scenes]
     if missing:
         raise ConfigError(f"checkpoints at steps {missing} have no oracle-scene outcomes; evaluate them first")
@@ -175,4 +182,77 @@ def score_criteria(
             ]
             rho = float(np.mean(shift_rhos)) if shift_rhos else None
             out.append(CriterionScore(name, None, tuple(picks[r.tag][name] for r in runs), t, b, g, rho))
+    return out
+
+
+@dataclass(frozen=True)
+class RefitScore:
+    """Refit on one shift (``shift`` None: the mean over shifts): a criterion chose the step count on a run
+    trained without its held-out episodes; the refit run trained on all of them to that step.  Each field is
+    a HierarchicalGain over seeds and scenes on the reporting scenes."""
+
+    criterion: str
+    shift: str | None
+    steps: tuple[int, ...]
+    pick: Any  # the held-out run's success at the pick (the shift)
+    refit: Any  # the refit run's success (the shift)
+    gain: Any  # refit minus pick on the shift, paired per run: what refitting recovers of what holding out cost
+    base_gain: Any  # the same on the base task
+
+
+def score_refit(
+    runs: Sequence[JudgedRun],
+    refits: Mapping[str, Mapping[str, Sequence[bool]]],
+    criterion: str,
+    patience: int | None,
+    fixed_step: int,
+    *,
+    n_boot: int = 2000,
+    seed: int = 0,
+) -> list[RefitScore]:
+    """Refit against the held-out pick, per shift and over shifts.  ``refits[tag][task]`` (task ``"target"``
+    or ``"base"``) is the refit run's per-scene success on the reporting scenes, its run trained on every
+    target episode for the step count ``criterion`` chose on run ``tag``."""
+    import numpy as np
+
+    from nsl.stats import hierarchical_gain, hierarchical_mean_gain
+
+    by_shift: dict[str, list[JudgedRun]] = {}
+    for r in runs:
+        if r.tag not in refits:
+            raise ConfigError(f"run {r.tag} has no refit outcomes; run the refit for {criterion!r} first")
+        by_shift.setdefault(r.shift, []).append(r)
+    if not by_shift:
+        raise ConfigError("no judged runs to compare refit with; evaluate the early-stopping runs first")
+    sizes = {s: len(v) for s, v in by_shift.items()}
+    if len(set(sizes.values())) != 1:
+        raise ConfigError(f"every shift needs the same number of runs to average over shifts; got {sizes}")
+
+    def at(run: JudgedRun, task: str) -> Any:
+        step = curve_picks(run.rows, patience, fixed_step)[criterion]
+        got = run.reporting.get((step, task))
+        if got is None:
+            raise ConfigError(f"run {run.tag} has no reporting-scene outcomes at step {step} on the {task}")
+        return np.asarray(got, dtype=np.float64)
+
+    def refit(run: JudgedRun, task: str) -> Any:
+        return np.asarray(refits[run.tag][task], dtype=np.float64)
+
+    fields = ("pick", "refit", "gain", "base_gain")
+    arrays: dict[str, list] = {k: [] for k in fields}
+    out = []
+    for shift, shift_runs in by_shift.items():
+        pick = np.stack([at(r, "target") for r in shift_runs])
+        ref = np.stack([refit(r, "target") for r in shift_runs])
+        base = np.stack([refit(r, "base") - at(r, "base") for r in shift_runs])
+        per = {"pick": pick, "refit": ref, "gain": ref - pick, "base_gain": base}
+        for k in fields:
+            arrays[k].append(per[k])
+        steps = tuple(curve_picks(r.rows, patience, fixed_step)[criterion] for r in shift_runs)
+        got = [hierarchical_gain(per[k][None], None, n_boot=n_boot, seed=seed) for k in fields]
+        out.append(RefitScore(criterion, shift, steps, *got))
+    if len(by_shift) > 1:
+        zeros = np.zeros((len(by_shift), arrays["pick"][0].shape[1]))
+        got = [hierarchical_mean_gain(np.stack(arrays[k])[:, None], zeros, n_boot=n_boot, seed=seed) for k in fields]
+        out.append(RefitScore(criterion, None, tuple(s for o in out for s in o.steps), *got))
     return out

@@ -11,6 +11,11 @@ Q-ranking AUC, TD error, average Q, FQE) on held-out target episodes.  This scri
     the final reporting scenes (seed 51425, 500 scenes), on the shift and on the base task.
   It costs 21 x 500 + about 6 x 1,000 episodes per run: about 12 minutes per run on this 2-core machine.
 
+``refit STUDY --criterion NAME`` (resumable): for every finished run at the plan's tier, the step count that
+  criterion chose on the run (trained without its held-out 20%) is used to train the run again, the same seed and
+  recipe, on all its target episodes (no held-out split); the refit checkpoint is scored on the final reporting
+  scenes, the shift and the base task, beside the pick.  About 5 minutes per run at a pick near 2,000 steps.
+
 ``export STUDY --out DIR``: copies the curves and the judged outcomes into DIR (the committed records);
 ``curves STUDY --out DIR`` copies only the finished runs' curves, while the study still runs.
 
@@ -19,6 +24,7 @@ reporting success, regret against the oracle with its hierarchical interval over
 rho against the oracle's scenes, the base task at the pick) and draws the Fig. 5.7 curves to DIR/curves.png.
 
     python scripts/experiments/early_stopping.py evaluate early-stop --workers 2
+    python scripts/experiments/early_stopping.py refit early-stop --criterion softopc
     python scripts/experiments/early_stopping.py export early-stop --out docs/experiments/early-stopping
     python scripts/experiments/early_stopping.py report docs/experiments/early-stopping
 """
@@ -37,6 +43,11 @@ JUDGED = "judged.jsonl"
 
 
 # --- the records --------------------------------------------------------------------------------------------------
+
+
+def refit_tag(criterion: str, tag: str) -> str:
+    """The refit of run ``tag`` to the step count ``criterion`` chose: its records' tag and checkpoint suffix."""
+    return f"refit-{criterion}-{tag}"
 
 
 def judged_tag(tag: str, step: int) -> str:
@@ -135,11 +146,8 @@ def meta_of(plan, oracle_episodes: int = ORACLE_EPISODES, reporting_episodes: in
 
 def evaluate(study: str, workers: int, episodes: tuple[int, int], only: list[str]) -> None:
     from nsl import workspace
-    from nsl.collectors import parse_shift_list
-    from nsl.eval import EvalConfig, evaluate_outcomes
     from nsl.eval.records import read_curve
     from nsl.eval.selection import needed_reporting
-    from nsl.learners import load_policy
 
     plan = plan_of(study)
     meta = meta_of(plan, *episodes)
@@ -154,15 +162,8 @@ def evaluate(study: str, workers: int, episodes: tuple[int, int], only: list[str
             return
         ckpt = workspace.home() / "runs" / f"{study}-{run}" / "checkpoints" / f"step-{step:09d}"
         if step == 0:
-            from nsl.catalog import Catalog
-            from nsl.services.refs import resolve_init
-
-            with Catalog() as cat:
-                ckpt = resolve_init(cat, plan.base).path
-        (spec,) = parse_shift_list(task if task != "target" else shift_of[run])
-        config = EvalConfig(episodes=episodes, seed=seed, workers=workers, batch=8)
-        got = evaluate_outcomes(functools.partial(load_policy, str(ckpt)), [spec], config, progress=False)
-        outcomes = next(iter(got.values()))
+            ckpt = base_checkpoint(plan)
+        outcomes = scenes_outcomes(ckpt, task if task != "target" else shift_of[run], seed, episodes, workers)
         append_judged(path, key, outcomes)
         judged[key] = outcomes
         print(f"{tag} step {step} {task} seed {seed}: {100 * sum(outcomes) / len(outcomes):.1f}%", flush=True)
@@ -192,6 +193,77 @@ def evaluate(study: str, workers: int, episodes: tuple[int, int], only: list[str
     (records / "meta.json").write_text(json.dumps(meta, indent=1) + "\n")
     shutil.copyfile(path, records / JUDGED)
     print(f"{len(runs)} of {len(meta['runs'])} runs judged; records in {records}")
+
+
+def refit(study: str, criterion: str, workers: int) -> None:
+    """Train each finished plan-tier run again on all its target data, to the step count ``criterion`` chose
+    on it, and score that checkpoint on the reporting scenes (the records go where ``evaluate`` puts them)."""
+    from dataclasses import replace
+
+    from nsl import workspace
+    from nsl.eval.records import read_curve
+    from nsl.eval.selection import curve_picks
+    from nsl.study.actions import base_sources, is_done, run_unit
+    from nsl.study.units import build_units
+
+    plan = plan_of(study)
+    meta = meta_of(plan)
+    units = build_units(plan, study, base_sources(plan))
+    folder = workspace.home() / "studies" / study
+    path = folder / JUDGED
+    judged = read_judged(path)
+    records = folder / "judging"
+    (records / "curves").mkdir(parents=True, exist_ok=True)
+    for r in meta["runs"]:
+        if r["label"] != r["shift"]:  # the extra runs (another tier, another base half) are not refitted
+            continue
+        curve = workspace.home() / "runs" / f"{study}-{r['tag']}" / "curve.csv"
+        rows = read_curve(curve) if curve.is_file() else []
+        if not rows or rows[-1].step != meta["steps"]:
+            continue
+        step = curve_picks(rows, meta["patience"], meta["fixed_step"])[criterion]
+        tag = refit_tag(criterion, r["tag"])
+        keys = [(tag, step, task, meta["reporting_seed"], meta["reporting_episodes"]) for task in ("target", "base")]
+        if all(k in judged for k in keys):
+            continue
+        if step == 0:
+            ckpt = base_checkpoint(plan)  # the criterion kept the base policy: refitting trains nothing
+        else:
+            unit = units[f"train:{r['tag']}"]
+            params = {**unit.params, "checkpoint": f"{study}-{tag}", "steps": step, "monitor": None}
+            job = replace(unit, name=f"train:{tag}", params=params)
+            if not is_done(job):
+                print(f"{tag}: training {step} steps on all {r['episodes']} target episodes", flush=True)
+                run_unit(job, workers=workers, progress=False)
+            ckpt = workspace.home() / "runs" / f"{study}-{tag}" / "checkpoints" / f"step-{step:09d}"
+        for key in keys:
+            if key not in judged:
+                shift = r["shift"] if key[2] == "target" else "base"
+                outcomes = scenes_outcomes(ckpt, shift, meta["reporting_seed"], meta["reporting_episodes"], workers)
+                append_judged(path, key, outcomes)
+                judged[key] = outcomes
+                print(f"{tag} step {step} {key[2]}: {100 * sum(outcomes) / len(outcomes):.1f}%", flush=True)
+    shutil.copyfile(path, records / JUDGED)
+
+
+def base_checkpoint(plan) -> Path:
+    from nsl.catalog import Catalog
+    from nsl.services.refs import resolve_init
+
+    with Catalog() as cat:
+        return Path(resolve_init(cat, plan.base).path)
+
+
+def scenes_outcomes(ckpt: Path, shift: str, seed: int, episodes: int, workers: int) -> list[bool]:
+    """Per-scene success of a checkpoint on ``episodes`` test-object scenes of ``shift`` (``base``: none)."""
+    from nsl.collectors import parse_shift_list
+    from nsl.eval import EvalConfig, evaluate_outcomes
+    from nsl.learners import load_policy
+
+    (spec,) = parse_shift_list(shift)
+    config = EvalConfig(episodes=episodes, seed=seed, workers=workers, batch=8)
+    got = evaluate_outcomes(functools.partial(load_policy, str(ckpt)), [spec], config, progress=False)
+    return list(next(iter(got.values())))
 
 
 def curves(study: str, out: Path) -> None:
@@ -265,6 +337,43 @@ def report(records: Path) -> None:
                     f"| {name} | {s.shift or '**mean**'} | {' '.join(map(str, s.steps)) if s.shift else ''} | "
                     f"{100 * s.target.mean:.1f}% | {s.regret.points()} | {rho} | {100 * s.base.mean:.1f}% |"
                 )
+    refit_table(meta, judged, main)
+
+
+def refit_table(meta: dict, judged: dict, runs: list) -> None:
+    """Refit against the held-out pick, for every criterion whose refits are all scored."""
+    from nsl.eval.selection import score_refit
+
+    seed, n = meta["reporting_seed"], meta["reporting_episodes"]
+    tags = {r.tag for r in runs}
+    criteria = set()
+    for t, *_rest in judged:
+        for tag in tags:
+            if t.startswith("refit-") and t.endswith("-" + tag):
+                criteria.add(t[len("refit-") : -len(tag) - 1])
+    for criterion in sorted(criteria):
+        refits: dict[str, dict[str, list[bool]]] = {}
+        for r in runs:
+            for (tag, _step, task, s, k), o in judged.items():
+                if tag == refit_tag(criterion, r.tag) and s == seed and k == n:
+                    refits.setdefault(r.tag, {})[task] = o
+        done = [r for r in runs if len(refits.get(r.tag, {})) == 2]
+        by_shift: dict[str, list] = {}
+        for r in sorted(done, key=lambda r: r.seed):
+            by_shift.setdefault(r.shift, []).append(r)
+        if not by_shift:
+            continue
+        k = min(len(v) for v in by_shift.values())
+        group = [r for v in by_shift.values() for r in v[:k]]
+        print(f"\n### Refit at {criterion}'s step count, all target episodes ({k} seeds each)\n")
+        print("| shift | steps | held-out run at the pick | refit | refit - pick [95%] | base task: refit - pick |")
+        print("|---|---|---|---|---|---|")
+        for x in score_refit(group, refits, criterion, meta["patience"], meta["fixed_step"]):
+            steps = " ".join(map(str, x.steps)) if x.shift else ""
+            print(
+                f"| {x.shift or '**mean**'} | {steps} | {100 * x.pick.mean:.1f}% | {100 * x.refit.mean:.1f}% | "
+                f"{x.gain.points()} | {x.base_gain.points()} |"
+            )
 
 
 def curve_means(records: Path, meta: dict, labels: list[str]) -> None:
@@ -358,6 +467,10 @@ def main() -> None:
     c = sub.add_parser("curves", help="copy the finished runs' curves out of the workspace (no evaluation)")
     c.add_argument("study")
     c.add_argument("--out", type=Path, required=True)
+    f = sub.add_parser("refit", help="retrain each run on all its target data to a criterion's step count")
+    f.add_argument("study")
+    f.add_argument("--criterion", required=True, help="whose step count: softopc, auc, td, qmean, fqe, fixed, ...")
+    f.add_argument("--workers", type=int, default=2)
     x = sub.add_parser("export", help="copy the judged records out of the workspace")
     x.add_argument("study")
     x.add_argument("--out", type=Path, required=True)
@@ -366,6 +479,8 @@ def main() -> None:
     a = ap.parse_args()
     if a.cmd == "evaluate":
         evaluate(a.study, a.workers, tuple(a.episodes), a.only)
+    elif a.cmd == "refit":
+        refit(a.study, a.criterion, a.workers)
     elif a.cmd == "curves":
         curves(a.study, a.out)
     elif a.cmd == "export":

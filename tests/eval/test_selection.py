@@ -5,7 +5,17 @@ import pytest
 
 from nsl.errors import ConfigError
 from nsl.eval.records import CurveRow, Rate
-from nsl.eval.selection import ORACLE, WHOLE_CURVE, JudgedRun, needed_reporting, run_picks, score_criteria, spearman
+from nsl.eval.selection import (
+    ORACLE,
+    WHOLE_CURVE,
+    JudgedRun,
+    curve_picks,
+    needed_reporting,
+    run_picks,
+    score_criteria,
+    score_refit,
+    spearman,
+)
 
 STEPS = [0, 500, 1000, 1500, 2000]
 SCENES = 400
@@ -99,3 +109,19 @@ def test_scoring_needs_the_picks_outcomes_and_equal_runs_per_shift():
     )
     with pytest.raises(ConfigError, match="at step 500 on the target"):
         score_criteria([thin, runs[1]], None, 1500)
+
+
+def test_refit_is_scored_against_the_held_out_pick_on_the_same_scenes():
+    runs = [make_run(shift, seed, TRUTH, SELECTION, QMEAN) for shift in ("a", "b") for seed in (0, 1)]
+    assert curve_picks(runs[0].rows, None, 1500)["qmean"] == 500  # no oracle needed to know the step count
+    # Refit at qmean's step 500: 66% on the shift where the held-out run had 60%, the base task 2 points lower.
+    refits = {r.tag: {"target": outcomes(0.66, 7), "base": outcomes(0.78, 8)} for r in runs}
+    scores = {s.shift: s for s in score_refit(runs, refits, "qmean", None, 1500, n_boot=400)}
+    a, mean = scores["a"], scores[None]
+    assert a.steps == (500, 500) and mean.steps == (500,) * 4
+    assert a.pick.mean == pytest.approx(0.6) and a.refit.mean == pytest.approx(0.66)
+    assert a.gain.mean == pytest.approx(0.06) and mean.gain.mean == pytest.approx(0.06)
+    assert a.gain.low < 0.06 < a.gain.high
+    assert a.base_gain.mean == pytest.approx(0.78 - 0.8)
+    with pytest.raises(ConfigError, match="no refit outcomes"):
+        score_refit(runs, {runs[0].tag: refits[runs[0].tag]}, "qmean", None, 1500)
