@@ -195,7 +195,7 @@ def evaluate(study: str, workers: int, episodes: tuple[int, int], only: list[str
     print(f"{len(runs)} of {len(meta['runs'])} runs judged; records in {records}")
 
 
-def refit(study: str, criterion: str, workers: int) -> None:
+def refit(study: str, criterion: str, workers: int, only: list[str]) -> None:
     """Train each finished plan-tier run again on all its target data, to the step count ``criterion`` chose
     on it, and score that checkpoint on the reporting scenes (the records go where ``evaluate`` puts them)."""
     from dataclasses import replace
@@ -215,7 +215,7 @@ def refit(study: str, criterion: str, workers: int) -> None:
     records = folder / "judging"
     (records / "curves").mkdir(parents=True, exist_ok=True)
     for r in meta["runs"]:
-        if r["label"] != r["shift"]:  # the extra runs (another tier, another base half) are not refitted
+        if r["label"] != r["shift"] or (only and r["tag"] not in only):  # the extra runs are not refitted
             continue
         curve = workspace.home() / "runs" / f"{study}-{r['tag']}" / "curve.csv"
         rows = read_curve(curve) if curve.is_file() else []
@@ -471,6 +471,7 @@ def main() -> None:
     f.add_argument("study")
     f.add_argument("--criterion", required=True, help="whose step count: softopc, auc, td, qmean, fqe, fixed, ...")
     f.add_argument("--workers", type=int, default=2)
+    f.add_argument("--only", nargs="*", default=[], metavar="TAG", help="refit these runs only")
     x = sub.add_parser("export", help="copy the judged records out of the workspace")
     x.add_argument("study")
     x.add_argument("--out", type=Path, required=True)
@@ -480,7 +481,7 @@ def main() -> None:
     if a.cmd == "evaluate":
         evaluate(a.study, a.workers, tuple(a.episodes), a.only)
     elif a.cmd == "refit":
-        refit(a.study, a.criterion, a.workers)
+        refit(a.study, a.criterion, a.workers, a.only)
     elif a.cmd == "curves":
         curves(a.study, a.out)
     elif a.cmd == "export":
