@@ -15,8 +15,8 @@ import pytest
 # one group per run, wherever their module is; a module whose tests share one run only joins that run's group whole
 # (``pytestmark``), so its module-scoped fixtures (a cluster, a transfer study) are built once, beside the run.  Every
 # other module is a group of its own.  The shared runs' groups go first, so the longest chains of work start at once
-# and the rest fills in beside them.  Each worker computes on one thread (two workers on two cores): torch's threads
-# on oversubscribed cores wait on each other, and made the longest fixtures 2.5x slower.
+# and the rest fills in beside them.  Each worker computes on one thread (two workers on two cores): with torch's
+# two threads each they wait on each other (ungrouped, the suite took 713 s so and 646 s with one; docs/testing.md).
 SHARED_RUNS = ("mini_run", "micro_run")
 if os.environ.get("PYTEST_XDIST_WORKER"):
     for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):
