@@ -221,13 +221,21 @@ def refit(study: str, criterion: str, workers: int, only: list[str]) -> None:
         rows = read_curve(curve) if curve.is_file() else []
         if not rows or rows[-1].step != meta["steps"]:
             continue
-        step = curve_picks(rows, meta["patience"], meta["fixed_step"])[criterion]
+        picks = curve_picks(rows, meta["patience"], meta["fixed_step"])
+        if criterion not in picks:
+            raise SystemExit(f"no criterion {criterion!r} on run {r['tag']}; choose one of {', '.join(sorted(picks))}")
+        step = picks[criterion]
         tag = refit_tag(criterion, r["tag"])
         keys = [(tag, step, task, meta["reporting_seed"], meta["reporting_episodes"]) for task in ("target", "base")]
         if all(k in judged for k in keys):
             continue
-        if step == 0:
-            ckpt = base_checkpoint(plan)  # the criterion kept the base policy: refitting trains nothing
+        if step == 0:  # the criterion kept the base policy: refitting trains nothing, and the base may be judged
+            ckpt = base_checkpoint(plan)
+            for key in keys:
+                known = judged.get(("base", 0, *key[2:]))
+                if key not in judged and known is not None:
+                    append_judged(path, key, known)
+                    judged[key] = known
         else:
             unit = units[f"train:{r['tag']}"]
             params = {**unit.params, "checkpoint": f"{study}-{tag}", "steps": step, "monitor": None}
@@ -342,7 +350,7 @@ def report(records: Path) -> None:
 
 def refit_table(meta: dict, judged: dict, runs: list) -> None:
     """Refit against the held-out pick, for every criterion whose refits are all scored."""
-    from nsl.eval.selection import score_refit
+    from nsl.eval.selection import curve_picks, score_refit
 
     seed, n = meta["reporting_seed"], meta["reporting_episodes"]
     tags = {r.tag for r in runs}
@@ -354,8 +362,9 @@ def refit_table(meta: dict, judged: dict, runs: list) -> None:
     for criterion in sorted(criteria):
         refits: dict[str, dict[str, list[bool]]] = {}
         for r in runs:
-            for (tag, _step, task, s, k), o in judged.items():
-                if tag == refit_tag(criterion, r.tag) and s == seed and k == n:
+            pick = curve_picks(r.rows, meta["patience"], meta["fixed_step"])[criterion]
+            for (tag, step, task, s, k), o in judged.items():  # a refit to another step count does not count
+                if tag == refit_tag(criterion, r.tag) and step == pick and s == seed and k == n:
                     refits.setdefault(r.tag, {})[task] = o
         done = [r for r in runs if len(refits.get(r.tag, {})) == 2]
         by_shift: dict[str, list] = {}
@@ -365,7 +374,10 @@ def refit_table(meta: dict, judged: dict, runs: list) -> None:
             continue
         k = min(len(v) for v in by_shift.values())
         group = [r for v in by_shift.values() for r in v[:k]]
+        shifts = {r.shift for r in runs}
         print(f"\n### Refit at {criterion}'s step count, all target episodes ({k} seeds each)\n")
+        if set(by_shift) != shifts:
+            print(f"Refits finished on {len(by_shift)} of {len(shifts)} shifts: the mean is over those only.\n")
         print("| shift | steps | held-out run at the pick | refit | refit - pick [95%] | base task: refit - pick |")
         print("|---|---|---|---|---|---|")
         for x in score_refit(group, refits, criterion, meta["patience"], meta["fixed_step"]):

@@ -22,7 +22,8 @@ from tests.cluster.conftest import FAST_FAILURE_DETECTION, NODE_MEMORY
 from tests.study.conftest import STUDY_THREADS
 from tests.study.test_study_run import _differences, _numbers
 
-# its tests share the micro plan's run: one xdist worker takes them all (tests/conftest.py)
+# its tests share the micro plan's run: one xdist worker takes them all (tests/conftest.py); the one mini-study test
+# here is `slow`, and `make test-slow` runs in one process
 pytestmark = pytest.mark.xdist_group("micro_run")
 
 ROOT = Path(__file__).resolve().parents[2]
