@@ -48,6 +48,7 @@ SHIPPED = (
     "early-stop",
     "supervised",
     "plasticity",
+    "efficiency",
     "online",
     "paper",
 )
@@ -236,6 +237,28 @@ class Plasticity:
     shrink_perturb: tuple[float, ...] = (0.8, 0.01)  # (alpha, sigma); () leaves the arm out
 
 
+EFFICIENCY_METHODS = ("ft", "scratch", "scratch_target")
+
+
+@dataclass(frozen=True)
+class Efficiency:
+    """Target data needed from scratch (finding (c)): at every tier of each shift's collection (the plan's
+    [collect] episodes, by the base; tiers are first-K views), FT from the base (``ft_steps``), scratch with the
+    recipe's base half and scratch on the target data alone (``scratch_steps``, longer), each with every seed, on
+    the reporting scenes.  Scratch keeps a curve on ``curve_episodes`` selection scenes every ``curve_every`` steps
+    (0: none), so the report can say whether it had stopped improving by its last step."""
+
+    shifts: tuple[str, ...] = ("harsh_lighting@2", "offset_gripper@0.25")
+    tiers: tuple[int, ...] = (25, 100, 400, 800, 1600, 3200)
+    methods: tuple[str, ...] = EFFICIENCY_METHODS
+    seeds: tuple[int, ...] = (0, 1, 2)
+    ft_steps: int = FINE_TUNE_STEPS
+    scratch_steps: int = 8000
+    curve_every: int = 2000
+    curve_episodes: int = 200
+    reference: int = 800  # the FT tier that scratch is measured against
+
+
 @dataclass(frozen=True)
 class Plan:
     name: str  # default study name (folder $NSL_HOME/studies/NAME)
@@ -267,12 +290,13 @@ class Plan:
     supervised: Supervised | None = None  # set when a supervised baseline is asked for (defaults if not given)
     online: Online | None = None  # online fine-tuning in rounds (off unless the plan has [online])
     plasticity: Plasticity | None = None  # plasticity or data, a 2x2 (off unless the plan has [plasticity])
+    efficiency: Efficiency | None = None  # target data needed from scratch (off unless the plan has [efficiency])
     source: str = ""  # where the plan was read from (not part of its identity)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d.pop("source")
-        for key in ("supervised", "online", "plasticity"):
+        for key in ("supervised", "online", "plasticity", "efficiency"):
             if d[key] is None:
                 del d[key]  # an absent section: plans made before it keep their record
         return d
@@ -289,6 +313,7 @@ SECTIONS = {
     "supervised": Supervised,
     "online": Online,
     "plasticity": Plasticity,
+    "efficiency": Efficiency,
 }
 
 
@@ -318,6 +343,9 @@ def _build(cls: type, d: Any, where: str):
         raise ConfigError(f"plan [{where}]: {e}; see study/plans/small.toml for a complete plan") from None
 
 
+OPTIONAL_SECTIONS = ("continual", "curves", "early_stop", "online", "plasticity", "efficiency")  # `= false`: off
+
+
 def parse_plan(data: dict[str, Any], source: str = "", default_name: str = "study") -> Plan:
     """A :class:`Plan` from parsed TOML, validated (raises ConfigError / UnknownReferenceError)."""
     top = {k: v for k, v in data.items() if k not in SECTIONS}
@@ -325,7 +353,7 @@ def parse_plan(data: dict[str, Any], source: str = "", default_name: str = "stud
     for key, cls in SECTIONS.items():
         if key not in data:
             continue
-        if data[key] in (False, None) and key in ("continual", "curves", "early_stop", "online", "plasticity"):
+        if data[key] in (False, None) and key in OPTIONAL_SECTIONS:
             sections[key] = None  # `continual = false` switches an experiment off
             continue
         table = data[key]
@@ -552,6 +580,29 @@ def validate(plan: Plan) -> None:
                 f"plan plasticity.shrink_perturb = {list(sp)} must be [alpha, sigma] with 0 < alpha <= 1 and "
                 "sigma >= 0, or [] for no such arm"
             )
+    if plan.efficiency is not None:
+        ef = plan.efficiency
+        for name in ef.shifts:
+            _shift(name, "efficiency.shifts")
+        for k in ("ft_steps", "scratch_steps", "curve_episodes", "reference"):
+            _positive(getattr(ef, k), f"efficiency.{k}")
+        if not isinstance(ef.curve_every, int) or ef.curve_every < 0:
+            raise ConfigError(f"plan efficiency.curve_every = {ef.curve_every!r} must be steps >= 0 (0: no curve)")
+        _seeds(ef.seeds, "efficiency.seeds")
+        if not ef.tiers or list(ef.tiers) != sorted(set(ef.tiers)) or ef.tiers[0] <= 0:
+            raise ConfigError(f"plan efficiency.tiers = {list(ef.tiers)} must be increasing episode counts above 0")
+        if ef.tiers[-1] > c.episodes:
+            raise ConfigError(
+                f"plan efficiency.tiers go to {ef.tiers[-1]} episodes, above the collection size collect.episodes = "
+                f"{c.episodes}; raise [collect] episodes"
+            )
+        if ef.reference not in ef.tiers:
+            raise ConfigError(f"plan efficiency.reference = {ef.reference} must be one of its tiers {list(ef.tiers)}")
+        for m in ef.methods:
+            if m not in EFFICIENCY_METHODS:
+                raise ConfigError(f"plan efficiency.methods has {m!r}; use {', '.join(EFFICIENCY_METHODS)}")
+        if "ft" not in ef.methods:
+            raise ConfigError("plan efficiency.methods needs ft: scratch is measured against FT at the reference")
     if plan.supervised is not None:
         sv = plan.supervised
         for k in ("frames", "steps"):

@@ -432,6 +432,8 @@ class _Builder:
             self._continual()
         if p.plasticity is not None:
             self._plasticity()
+        if self.plan.efficiency is not None:
+            self._efficiency()
         if p.online is not None:
             self._online()
         if p.curves is not None:
@@ -514,6 +516,60 @@ class _Builder:
             self.train(tag, pl.shift, data, method="ft", init=init, steps=pl.steps, seed=seed, shrink_perturb=sp)
             self.evaluate(tag, pl.shift)
             self.evaluate(tag, "base")
+
+    def _efficiency(self) -> None:
+        """FT and scratch at every tier of each shift, on the reporting scenes; scratch with its selection curve."""
+        p, ef = self.plan, self.plan.efficiency
+        assert ef is not None
+        for run in efficiency_runs(p):
+            scratch = run.method != "ft"
+            monitor = None
+            if scratch and ef.curve_every:
+                monitor = {
+                    "every": ef.curve_every,
+                    "episodes": ef.curve_episodes,
+                    "base_episodes": 0,  # the shift only: scratch has no base task to keep
+                    "seed": p.eval.selection_seed,
+                    "holdout": None,
+                }
+            self.train(
+                run.tag,
+                run.shift,
+                self.target_data(run.shift, run.tier),
+                method="scratch" if scratch else "ft",
+                init=BASE_POLICY,  # scratch re-initialises the base's architecture
+                steps=ef.scratch_steps if scratch else ef.ft_steps,
+                seed=run.seed,
+                monitor=monitor,
+                mixed=run.method != "scratch_target",
+            )
+            self.evaluate(run.tag, run.shift)
+
+
+class EfficiencyRun(NamedTuple):
+    tag: str  # the train tag
+    shift: str
+    tier: int  # target episodes
+    method: str  # one of EFFICIENCY_METHODS
+    seed: int
+
+
+def efficiency_runs(plan: Plan) -> list[EfficiencyRun]:
+    """Every run of the plan's [efficiency], shift by shift, method by method, tier by tier.  FT's tags are the
+    fine-tuning tiers' own (a plan's [finetune] run with the same steps is shared); scratch's carry ``eff-``."""
+    ef = plan.efficiency
+    if ef is None:
+        return []
+    out = []
+    for shift in ef.shifts:
+        for method in ef.methods:
+            steps = ef.ft_steps if method == "ft" else ef.scratch_steps
+            prefix = None if method == "ft" else f"eff-{method.replace('_', '-')}"
+            for tier in ef.tiers:
+                for seed in ef.seeds:
+                    tag = train_tag(method, shift, tier, steps, seed, prefix)
+                    out.append(EfficiencyRun(tag, shift, tier, method, seed))
+    return out
 
 
 PLASTICITY_ARMS = ("base/base", "base/stage", "stage/base", "stage/stage", "stage-sp/base")  # start/data

@@ -15,6 +15,7 @@ from .tables import (
     cross_shift_table,
     curves_table,
     early_stop_table,
+    efficiency_table,
     findings_table,
     headline_table,
     online_table,
@@ -146,6 +147,19 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
                 f"{pl['stage']} policy, on the episodes the base collected or those that policy collected. If the "
                 "start explains the sequence's shortfall, the start's contrasts are negative whatever the data; if "
                 "the data does, the data's are.",
+                table,
+            )
+    if plan.get("efficiency"):
+        ef = plan["efficiency"]
+        table = efficiency_table(records)
+        if table:
+            parts += _blocks(
+                "## Target data needed from scratch (finding (c))",
+                f"At each tier of the base's episodes of the shift: FT from the base ({ef['ft_steps']} steps), and "
+                f"scratch, from a random initialisation, with the recipe's base half and on the target data alone "
+                f"({ef['scratch_steps']} steps), seeds {', '.join(map(str, ef['seeds']))}, on the reporting scenes. "
+                f"Scratch reaches FT when the paired difference to FT at {ef['reference']} episodes has an interval "
+                "that reaches 0. Scratch's selection curve says whether it had stopped improving.",
                 table,
             )
     if plan.get("curves"):

@@ -15,6 +15,7 @@ from ..units import (
     FEATURES_POLICY,
     continual_tags,
     early_stop_runs,
+    efficiency_runs,
     no_target_tag,
     online_runs,
     online_tag,
@@ -129,6 +130,14 @@ def gather(plan: Plan, study: str, evaluation, read_curve_file, checkpoint=None)
             a["shift"].append(ev(run.tag, plan.plasticity.shift))
             a["base"].append(ev(run.tag, "base"))
         out["plasticity"] = arms
+    if plan.efficiency is not None:  # target data needed from scratch: each run on its shift, scratch's curves
+        eff: dict[str, dict[str, Any]] = {}
+        for run in efficiency_runs(plan):
+            m = eff.setdefault(run.shift, {}).setdefault(run.method, {"tiers": {}, "curves": {}})
+            m["tiers"].setdefault(str(run.tier), []).append(ev(run.tag, run.shift))
+            if run.method != "ft" and plan.efficiency.curve_every:
+                m["curves"].setdefault(str(run.tier), []).append(_rows(read_curve_file(f"{study}-{run.tag}")))
+        out["efficiency"] = eff
     if plan.curves is not None:
         cv = plan.curves
         curves = {}

@@ -423,3 +423,87 @@ def plasticity_table(records: Mapping[str, Any]) -> str:
     if crows:
         lines.append(pipe_table(["contrast, on the shift", "points [95%, seeds and scenes, paired]"], crows))
     return "\n".join(lines)
+
+
+def efficiency_match(records: Mapping[str, Any], shift: str, method: str) -> dict[str, Any] | None:
+    """The smallest tier at which ``method``'s interval reaches FT's at the reference tier: the paired difference
+    (method - FT@reference, seeds and scenes) has an upper end at or above 0.  ``tier`` None: no measured tier
+    reaches it.  None until FT's reference cell is measured."""
+    from nsl.stats import hierarchical_difference
+
+    ef = records["plan"]["efficiency"]
+    cells = ((records.get("efficiency") or {}).get(shift) or {}).get
+    ft = _outcomes(((cells("ft") or {}).get("tiers") or {}).get(str(ef["reference"])))
+    if ft is None:
+        return None
+    for tier in ef["tiers"]:
+        got = _outcomes(((cells(method) or {}).get("tiers") or {}).get(str(tier)))
+        if got is None:
+            continue
+        d = hierarchical_difference(got, ft)
+        if d.high >= 0:
+            return {"tier": tier, "difference": d.points(), "ratio": tier / ef["reference"]}
+    return {"tier": None, "difference": None, "ratio": None}
+
+
+def _outcomes(cells: Sequence[Any] | None) -> Any:
+    """(1 collection, seeds, scenes) outcomes of a cell's seeds, or None while any is unmeasured."""
+    if not cells or any(c is None or not c.get("outcomes") for c in cells):
+        return None
+    return [[[int(x) for x in c["outcomes"]] for c in cells]]
+
+
+def efficiency_table(records: Mapping[str, Any]) -> str:
+    """Target data needed from scratch: success on the shift at every tier (seed means, hierarchical intervals over
+    seeds and scenes), scratch's selection curve at its last step against its best (converged or not), and the
+    smallest tier at which each scratch method reaches FT at the reference tier; '' until a cell is measured."""
+    from nsl.stats import hierarchical_rate
+
+    ef = records["plan"]["efficiency"]
+    data = records.get("efficiency") or {}
+    names = {"ft": "FT", "scratch": "scratch (base half)", "scratch_target": "scratch (target only)"}
+    lines: list[str] = []
+    for shift, methods in data.items():
+        rows = []
+        for tier in ef["tiers"]:
+            row = [str(tier)]
+            for m in ef["methods"]:
+                o = _outcomes(((methods.get(m) or {}).get("tiers") or {}).get(str(tier)))
+                row.append("-" if o is None else _rate(hierarchical_rate(o)))
+            rows.append(row)
+        if not any(c != "-" for r in rows for c in r[1:]):
+            continue
+        lines += [f"**{shift}**", "", pipe_table(["target episodes", *(names[m] for m in ef["methods"])], rows), ""]
+        crows = []
+        for m in ef["methods"]:
+            for tier, curves in ((methods.get(m) or {}).get("curves") or {}).items():
+                done = [c for c in curves if c]
+                if not done:
+                    continue
+                best = [max(c, key=lambda r: (r["target_success"] or 0.0, -r["step"])) for c in done]
+                gap = [
+                    100 * ((c[-1]["target_success"] or 0.0) - (b["target_success"] or 0.0)) for c, b in zip(done, best)
+                ]
+                steps = " ".join(str(b["step"]) for b in best)
+                crows.append([names[m], tier, steps, f"{sum(gap) / len(gap):+.1f}"])
+        if crows:
+            lines += [
+                pipe_table(["method", "tier", "best step on selection scenes, by seed", "last - best (points)"], crows),
+                "",
+            ]
+        for m in ef["methods"]:
+            if m == "ft":
+                continue
+            got = efficiency_match(records, shift, m)
+            if got is None:
+                continue
+            if got["tier"] is None:
+                lines.append(f"- {names[m]} does not reach FT at {ef['reference']} episodes by {ef['tiers'][-1]}.")
+            else:
+                lines.append(
+                    f"- {names[m]} reaches FT at {ef['reference']} episodes with {got['tier']} "
+                    f"({got['difference']} points against it): {got['ratio']:g}x FT's target data; FT needs "
+                    f"{100 / got['ratio']:.0f}% of it (the source: 0.2% of scratch's)."
+                )
+        lines.append("")
+    return "\n".join(lines).strip()

@@ -149,8 +149,15 @@ def test_shipped_plans_parse_and_build_a_graph(name):
         assert {d.name: d.weight for d in plan.base_data.datasets} == pytest.approx(
             {n: w for n, w in recorded.items() if n.startswith("grasp-base-")}, abs=1e-3
         )
-        own = {"cross-engine": ("engine:pybullet",), "plasticity": (STUDY_SHIFTS[-1],)}  # one shift of their own
+        own = {  # the shifts of their own
+            "cross-engine": ("engine:pybullet",),
+            "plasticity": (STUDY_SHIFTS[-1],),
+            "efficiency": (STUDY_SHIFTS[0], STUDY_SHIFTS[-1]),
+        }
         assert plan.shifts == own.get(name, STUDY_SHIFTS)
+        if name == "efficiency":  # the calibrated severities, tiers to everything the base collects, FT's at 800
+            assert plan.efficiency.shifts == plan.shifts and plan.efficiency.tiers[-1] == plan.collect.episodes
+            assert plan.finetune.tiers == (plan.efficiency.reference,)
         if name == "plasticity":  # the 2x2 on the sequence's last stage, started from the stage before it
             assert plan.continual.sequence == STUDY_SHIFTS and plan.plasticity.shift == STUDY_SHIFTS[-1]
     if name in ("full", "paper"):

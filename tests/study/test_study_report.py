@@ -574,3 +574,75 @@ def test_the_plasticity_table_gives_each_arm_and_the_paired_contrasts():
     assert "## Plasticity or data (finding (d))" in render(rec, None, {})
     del rec["plasticity"]["stage/stage"]  # an arm not measured leaves its row and its contrasts out
     assert "from the stage policy" not in plasticity_table(rec)
+
+
+def test_the_efficiency_table_finds_the_smallest_tier_where_scratch_reaches_ft():
+    from nsl.study.report import efficiency_table
+
+    section = '\n[efficiency]\nshifts = ["harsh_lighting"]\ntiers = [4, 8]\nseeds = [0, 1]\nreference = 8\n'
+    rec = records(plan=parse_plan(tomllib.loads(RECORDS_PLAN + section), default_name="mini").to_dict())
+    assert efficiency_table(rec) == ""  # nothing measured yet
+
+    def cell(k: int, n: int = 200) -> dict:  # the first k of n scenes succeed
+        return {"successes": k, "episodes": n, "outcomes": "1" * k + "0" * (n - k)}
+
+    curve = [
+        {"step": 0, "target_success": 0.1},
+        {"step": 10, "target_success": 0.3},
+        {"step": 20, "target_success": 0.25},
+    ]
+    rec["efficiency"] = {
+        "harsh_lighting": {
+            "ft": {"tiers": {"4": [cell(100)] * 2, "8": [cell(140)] * 2}, "curves": {}},
+            # scratch is 40 points short with half the data and level with FT at the reference tier
+            "scratch": {"tiers": {"4": [cell(60)] * 2, "8": [cell(140)] * 2}, "curves": {"4": [curve, curve]}},
+            "scratch_target": {"tiers": {"4": [cell(20)] * 2, "8": [cell(40)] * 2}, "curves": {"8": [None, None]}},
+        }
+    }
+    text = efficiency_table(rec)
+    lines = text.splitlines()
+    assert lines[0] == "**harsh_lighting**"
+    assert lines[4].startswith("| 4 | 50.0% [") and "| 30.0% [" in lines[4] and "| 10.0% [" in lines[4]
+    assert "| scratch (base half) | 4 | 10 10 | -5.0 |" in text  # its best at step 10, its last 5 points lower
+    assert "- scratch (base half) reaches FT at 8 episodes with 8 (+0.0 [" in text
+    assert "1x FT's target data; FT needs 100% of it" in text
+    assert "- scratch (target only) does not reach FT at 8 episodes by 8." in text
+    assert "## Target data needed from scratch (finding (c))" in render(rec, None, {})
+    rec["efficiency"]["harsh_lighting"]["ft"]["tiers"]["8"][1] = None  # FT's reference unmeasured: no verdict
+    assert "reaches FT" not in efficiency_table(rec) and "does not reach" not in efficiency_table(rec)
+
+
+def test_gather_reads_every_efficiency_run_and_scratchs_curves():
+    from types import SimpleNamespace
+
+    from nsl.eval.records import CurveRow, Rate
+    from nsl.study.plan import load_plan
+    from nsl.study.report.gather import gather
+
+    plan = load_plan("efficiency")
+    seen = []
+
+    def evaluation(ref, shift, episodes, seed):
+        seen.append((ref, shift, episodes, seed))
+        return SimpleNamespace(successes=3, episodes=episodes, extra={"outcomes": "1" * 3 + "0" * (episodes - 3)})
+
+    def read_curve_file(name):
+        return [CurveRow(0, target=Rate(0.1, 200)), CurveRow(2000, target=Rate(0.4, 200))] if "-n25-" in name else None
+
+    eff = gather(plan, "efficiency", evaluation, read_curve_file)["efficiency"]
+    assert set(eff) == {"harsh_lighting@2", "offset_gripper@0.25"}
+    offset = eff["offset_gripper@0.25"]
+    assert set(offset) == {"ft", "scratch", "scratch_target"}
+    assert list(offset["scratch"]["tiers"]) == ["25", "100", "400", "800", "1600", "3200"]
+    assert all(len(cells) == 3 and cells[0]["successes"] == 3 for cells in offset["scratch_target"]["tiers"].values())
+    assert offset["ft"]["curves"] == {}  # FT keeps no curve
+    assert (
+        offset["scratch"]["curves"]["25"][0][-1]["target_success"] == 0.4
+        and offset["scratch"]["curves"]["100"] == [None] * 3
+    )
+    assert (
+        "ckpt:efficiency-eff-scratch-offset-gripper-0.25-n3200-k8000-s2@latest",
+        "offset_gripper@0.25",
+        500,
+        51425,
+    ) in seen

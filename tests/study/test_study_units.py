@@ -430,3 +430,57 @@ def test_a_bad_plasticity_section_is_refused_in_one_line():
         with pytest.raises(ConfigError, match=message.replace("[", r"\[")) as err:
             parse_plan(tomllib.loads(text), default_name="mini")
         assert "\n" not in str(err.value)
+
+
+EFFICIENCY = (
+    '\n[efficiency]\nshifts = ["harsh_lighting"]\ntiers = [4, 8]\nseeds = [0, 1]\nft_steps = 10\n'
+    "scratch_steps = 20\ncurve_every = 10\ncurve_episodes = 3\nreference = 8\n"
+)
+
+
+def test_efficiency_trains_ft_and_both_scratches_at_every_tier_and_shares_fts_runs():
+    from nsl.study.units import efficiency_runs
+
+    plan, units = _units(MINI_PLAN + EFFICIENCY)
+    runs = efficiency_runs(plan)
+    assert len(runs) == 3 * 2 * 2  # methods x tiers x seeds
+    # FT's runs are the fine-tuning tiers' own: the same unit as the plan's [finetune] at 8 episodes, 10 steps
+    assert "ft-harsh-lighting-n8-k10-s0" in [r.tag for r in runs]
+    ft = units["train:ft-harsh-lighting-n4-k10-s1"]
+    assert ft.params["monitor"] is None and ft.params["target"]["tier"] == 4 and ft.params["method"] == "ft"
+    scratch = units["train:eff-scratch-harsh-lighting-n8-k20-s1"]
+    assert scratch.params["method"] == "scratch" and scratch.params["steps"] == 20 and scratch.params["base"]
+    assert scratch.params["monitor"] == {
+        "every": 10,
+        "episodes": 3,
+        "base_episodes": 0,
+        "seed": plan.eval.selection_seed,
+        "holdout": None,
+    }
+    alone = units["train:eff-scratch-target-harsh-lighting-n4-k20-s0"]
+    assert alone.params["base"] == [] and alone.params["target"]["weight"] == 1.0
+    for r in runs:
+        assert f"eval:{r.tag}:harsh_lighting" in units
+    _, flat = _units(MINI_PLAN + EFFICIENCY.replace("curve_every = 10", "curve_every = 0"))
+    assert flat["train:eff-scratch-harsh-lighting-n8-k20-s1"].params["monitor"] is None
+
+
+def test_a_bad_efficiency_section_is_refused_in_one_line():
+    import pytest
+
+    from nsl.errors import ConfigError
+
+    for change, message in (
+        ("tiers = [4, 16]", "efficiency.tiers go to 16 episodes, above the collection size collect.episodes = 8"),
+        ("tiers = [8, 4]", "efficiency.tiers = [8, 4] must be increasing"),
+        ("reference = 5", "efficiency.reference = 5 must be one of its tiers"),
+        ('methods = ["scratch"]', "efficiency.methods needs ft"),
+        ('methods = ["ft", "iql"]', "efficiency.methods has 'iql'"),
+    ):
+        key = change.split(" = ")[0]
+        lines = [change if line.startswith(key + " ") else line for line in EFFICIENCY.splitlines()]
+        if key == "methods":
+            lines.append(change)
+        with pytest.raises(ConfigError, match=message.replace("[", r"\[")) as err:
+            parse_plan(tomllib.loads(MINI_PLAN + "\n".join(lines) + "\n"), default_name="mini")
+        assert "\n" not in str(err.value)
