@@ -228,8 +228,10 @@ def score_refit(
     if len(set(sizes.values())) != 1:
         raise ConfigError(f"every shift needs the same number of runs to average over shifts; got {sizes}")
 
+    step_of = {r.tag: curve_picks(r.rows, patience, fixed_step)[criterion] for r in runs}
+
     def at(run: JudgedRun, task: str) -> Any:
-        step = curve_picks(run.rows, patience, fixed_step)[criterion]
+        step = step_of[run.tag]
         got = run.reporting.get((step, task))
         if got is None:
             raise ConfigError(f"run {run.tag} has no reporting-scene outcomes at step {step} on the {task}")
@@ -248,7 +250,7 @@ def score_refit(
         per = {"pick": pick, "refit": ref, "gain": ref - pick, "base_gain": base}
         for k in fields:
             arrays[k].append(per[k])
-        steps = tuple(curve_picks(r.rows, patience, fixed_step)[criterion] for r in shift_runs)
+        steps = tuple(step_of[r.tag] for r in shift_runs)
         got = [hierarchical_gain(per[k][None], None, n_boot=n_boot, seed=seed) for k in fields]
         out.append(RefitScore(criterion, shift, steps, *got))
     if len(by_shift) > 1:

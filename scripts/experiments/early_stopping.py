@@ -213,7 +213,7 @@ def refit(study: str, criterion: str, workers: int, only: list[str]) -> None:
     path = folder / JUDGED
     judged = read_judged(path)
     records = folder / "judging"
-    (records / "curves").mkdir(parents=True, exist_ok=True)
+    records.mkdir(parents=True, exist_ok=True)
     for r in meta["runs"]:
         if r["label"] != r["shift"] or (only and r["tag"] not in only):  # the extra runs are not refitted
             continue

@@ -138,30 +138,26 @@ def render(records: Mapping[str, Any], status: Mapping[str, Any] | None, figures
         )
     if plan.get("plasticity"):
         pl = plan["plasticity"]
-        table = plasticity_table(records)
-        if table:
-            parts += _blocks(
-                "## Plasticity or data (finding (d))",
-                f"{pretty(pl['shift'])}: fine-tunes of {pl['steps']} steps on {pl['episodes']} target episodes "
-                f"(seeds {', '.join(map(str, pl['seeds']))}), from the base or from the continual sequence's stage "
-                f"{pl['stage']} policy, on the episodes the base collected or those that policy collected. If the "
-                "start explains the sequence's shortfall, the start's contrasts are negative whatever the data; if "
-                "the data does, the data's are.",
-                table,
-            )
+        parts += _measured(
+            "## Plasticity or data (finding (d))",
+            f"{pretty(pl['shift'])}: fine-tunes of {pl['steps']} steps on {pl['episodes']} target episodes "
+            f"(seeds {', '.join(map(str, pl['seeds']))}), from the base or from the continual sequence's stage "
+            f"{pl['stage']} policy, on the episodes the base collected or those that policy collected. If the "
+            "start explains the sequence's shortfall, the start's contrasts are negative whatever the data; if "
+            "the data does, the data's are.",
+            plasticity_table(records),
+        )
     if plan.get("efficiency"):
         ef = plan["efficiency"]
-        table = efficiency_table(records)
-        if table:
-            parts += _blocks(
-                "## Target data needed from scratch (finding (c))",
-                f"At each tier of the base's episodes of the shift: FT from the base ({ef['ft_steps']} steps), and "
-                f"scratch, from a random initialisation, with the recipe's base half and on the target data alone "
-                f"({ef['scratch_steps']} steps), seeds {', '.join(map(str, ef['seeds']))}, on the reporting scenes. "
-                f"Scratch reaches FT when the paired difference to FT at {ef['reference']} episodes has an interval "
-                "that reaches 0. Scratch's selection curve says whether it had stopped improving.",
-                table,
-            )
+        parts += _measured(
+            "## Target data needed from scratch (finding (c))",
+            f"At each tier of the base's episodes of the shift: FT from the base ({ef['ft_steps']} steps), and "
+            f"scratch, from a random initialisation, with the recipe's base half and on the target data alone "
+            f"({ef['scratch_steps']} steps), seeds {', '.join(map(str, ef['seeds']))}, on the reporting scenes. "
+            f"Scratch reaches FT when the paired difference to FT at {ef['reference']} episodes has an interval "
+            "that reaches 0. Scratch's selection curve says whether it had stopped improving.",
+            efficiency_table(records),
+        )
     if plan.get("curves"):
         cv = plan["curves"]
         parts += _blocks(
@@ -223,6 +219,11 @@ def _headline(records: Mapping[str, Any]) -> list[str]:
 def _blocks(*texts: str) -> list[str]:
     """Headings, paragraphs and tables of the document, each followed by a blank line."""
     return [line for text in texts for line in (text, "")]
+
+
+def _measured(heading: str, intro: str, table: str) -> list[str]:
+    """A section whose table is '' until something is measured: nothing until then."""
+    return _blocks(heading, intro, table) if table else []
 
 
 def _figure(figures: Mapping[str, str], key: str, alt: str) -> list[str]:

@@ -384,10 +384,7 @@ def plasticity_table(records: Mapping[str, Any]) -> str:
     stage = f"stage {pl['stage']}"
 
     def outcomes(arm: str, task: str) -> Any:
-        cells = (arms.get(arm) or {}).get(task) or []
-        if not cells or any(c is None or not c.get("outcomes") for c in cells):
-            return None
-        return [[[int(x) for x in c["outcomes"]] for c in cells]]  # (1 collection, seeds, scenes)
+        return _outcomes((arms.get(arm) or {}).get(task))
 
     names = {
         "base/base": ("the base", "the base's"),
